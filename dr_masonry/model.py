@@ -1,0 +1,325 @@
+"""The block assembly as arrays: nodes, hexahedra, blocks. No physics here.
+
+Conventions
+-----------
+* SI units: coordinates in m.
+* Global axes: x along a wall, y through its thickness, z up (gravity acts along -z).
+* Hexahedron corner order is VTK's: corners 0-3 on the bottom face (natural zeta = -1)
+  counter-clockwise seen from above, 4-7 above them. Natural coordinates of corner a are
+  ``HEX_NATURAL[a]``.
+* A block is meshed by the trilinear map of its 8 corners into ``nx * ny * nz`` hexahedra
+  (``nx`` along natural xi = corner 0 -> 1, ``ny`` along eta = 0 -> 3, ``nz`` along zeta = 0 -> 4).
+  Its nodes are numbered ``i + (nx+1) * (j + (ny+1) * k)`` from the block's first node.
+* Blocks share no nodes: every block owns a contiguous range of nodes and of elements.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+HEX_NATURAL = np.array(
+    [[-1, -1, -1], [1, -1, -1], [1, 1, -1], [-1, 1, -1],
+     [-1, -1, 1], [1, -1, 1], [1, 1, 1], [-1, 1, 1]], dtype=np.float64)
+
+#: the six faces of a block: (natural axis 0/1/2 held fixed, side -1/+1)
+BLOCK_FACES = ((2, -1), (2, 1), (1, -1), (1, 1), (0, -1), (0, 1))
+
+
+class ModelError(ValueError):
+    """Invalid model input; the message names the block, parameter and value."""
+
+
+def trilinear_shape(nat):
+    """Trilinear shape functions at natural points ``nat`` (m, 3) -> (m, 8)."""
+    nat = np.atleast_2d(nat)
+    return 0.125 * np.prod(1.0 + nat[:, None, :] * HEX_NATURAL[None, :, :], axis=2)
+
+
+def trilinear_jacobian(corners, nat):
+    """Jacobians dX/dnat (m, 3, 3) of the trilinear map of ``corners`` (8, 3) at ``nat`` (m, 3)."""
+    nat = np.atleast_2d(nat)
+    dn = np.empty((nat.shape[0], 8, 3))
+    for a in range(3):
+        fac = 1.0 + nat[:, None, :] * HEX_NATURAL[None, :, :]
+        fac[:, :, a] = HEX_NATURAL[None, :, a]
+        dn[:, :, a] = 0.125 * np.prod(fac, axis=2)
+    return np.einsum("ai,mak->mik", corners, dn)
+
+
+def box_corners(origin, size):
+    """Corners (8, 3) of the axis-aligned box with minimum corner ``origin`` and edge lengths ``size``."""
+    origin = np.asarray(origin, dtype=np.float64)
+    size = np.asarray(size, dtype=np.float64)
+    return origin + 0.5 * (HEX_NATURAL + 1.0) * size
+
+
+@dataclass
+class Block:
+    """One block: its node and element ranges and its properties (read-only view)."""
+    index: int
+    nodes: slice
+    elements: slice
+    divisions: tuple
+    material: int
+    fixed: bool
+    joint: int
+    group: str
+
+
+@dataclass
+class Model:
+    """An assembly of blocks meshed by hexahedra, with its materials and joint laws.
+
+    Arrays (built by :meth:`add_block`, read them through the properties):
+
+    ``nodes`` (n_nodes, 3) float64, m
+        reference coordinates.
+    ``elements`` (n_elements, 8) int64
+        global node ids of each hexahedron, VTK order.
+    ``element_block`` (n_elements,) int64
+        owning block.
+    ``block_node_start`` / ``block_element_start`` (n_blocks + 1,) int64
+        CSR offsets: block b owns nodes ``[start[b], start[b+1])``.
+    ``block_divisions`` (n_blocks, 3) int64, ``block_corners`` (n_blocks, 8, 3) float64 m,
+    ``block_material`` (n_blocks,) int64 index into ``materials``,
+    ``block_fixed`` (n_blocks,) bool (all nodes of a fixed block are clamped),
+    ``block_joint`` (n_blocks,) int64 index into ``joint_laws`` used for every contact of the
+    block, or -1 for the model's default joint law.
+    """
+    materials: list = field(default_factory=list)
+    joint_laws: list = field(default_factory=list)
+    default_joint: int = -1
+    groups: dict = field(default_factory=dict)
+    contacts: object = None
+
+    def __post_init__(self):
+        self._node_chunks = []
+        self._elem_chunks = []
+        self._corners = []
+        self._divisions = []
+        self._material = []
+        self._fixed = []
+        self._joint = []
+        self._group = []
+        self._node_start = [0]
+        self._elem_start = [0]
+        self._cache = {}
+
+    # ------------------------------------------------------------------ materials
+    def _register(self, registry, item):
+        for i, it in enumerate(registry):
+            if it is item:
+                return i
+        registry.append(item)
+        return len(registry) - 1
+
+    def set_joint_law(self, law):
+        """Set the default joint law for contacts between blocks that name none."""
+        self.default_joint = self._register(self.joint_laws, law)
+        return self.default_joint
+
+    # ------------------------------------------------------------------ blocks
+    def add_block(self, corners, material, divisions=(1, 1, 1), fixed=False, joint=None,
+                  group="block"):
+        """Add one block meshed by a trilinear map; returns its block id.
+
+        Parameters
+        ----------
+        corners : (8, 3) array_like, m
+            block corners in VTK hexahedron order (0-3 bottom, counter-clockwise from above).
+        material : PlasticDamage
+            block material.
+        divisions : (nx, ny, nz) ints
+            hexahedra along natural xi (corner 0->1), eta (0->3), zeta (0->4).
+        fixed : bool
+            clamp every node of the block (foundations).
+        joint : JointLaw or None
+            joint law of every contact this block takes part in (e.g. a tied beam interface);
+            None uses the model's default joint law.
+        group : str
+            name of a block group (``"wall"``, ``"beam"``, ...), see :attr:`groups`.
+        """
+        b = len(self._corners)
+        c = np.asarray(corners, dtype=np.float64)
+        if c.shape != (8, 3):
+            raise ModelError(f"block {b}: corners must have shape (8, 3), got {c.shape}")
+        if not np.all(np.isfinite(c)):
+            raise ModelError(f"block {b}: corners contain NaN or Inf: {c.tolist()}")
+        div = tuple(int(v) for v in divisions)
+        if len(div) != 3 or min(div) < 1:
+            raise ModelError(f"block {b}: divisions must be three integers >= 1, got {divisions}")
+        if material is None or not hasattr(material, "params_array"):
+            raise ModelError(f"block {b}: material must be a PlasticDamage, got {material!r}")
+        self._check_corners(b, c)
+        nx, ny, nz = div
+        gi = np.linspace(-1.0, 1.0, nx + 1)
+        gj = np.linspace(-1.0, 1.0, ny + 1)
+        gk = np.linspace(-1.0, 1.0, nz + 1)
+        kk, jj, ii = np.meshgrid(gk, gj, gi, indexing="ij")
+        nat = np.column_stack([ii.ravel(), jj.ravel(), kk.ravel()])
+        xyz = trilinear_shape(nat) @ c
+        n0 = self._node_start[-1]
+        i, j, k = np.meshgrid(np.arange(nx), np.arange(ny), np.arange(nz), indexing="ij")
+        i, j, k = (a.transpose(2, 1, 0).ravel() for a in (i, j, k))
+
+        def nid(a, bb, cc):
+            return n0 + a + (nx + 1) * (bb + (ny + 1) * cc)
+
+        conn = np.column_stack([
+            nid(i, j, k), nid(i + 1, j, k), nid(i + 1, j + 1, k), nid(i, j + 1, k),
+            nid(i, j, k + 1), nid(i + 1, j, k + 1), nid(i + 1, j + 1, k + 1), nid(i, j + 1, k + 1)])
+        self._node_chunks.append(xyz)
+        self._elem_chunks.append(conn.astype(np.int64))
+        self._corners.append(c)
+        self._divisions.append(div)
+        self._material.append(self._register(self.materials, material))
+        self._fixed.append(bool(fixed))
+        self._joint.append(-1 if joint is None else self._register(self.joint_laws, joint))
+        self._group.append(group)
+        self.groups.setdefault(group, []).append(b)
+        self._node_start.append(n0 + xyz.shape[0])
+        self._elem_start.append(self._elem_start[-1] + conn.shape[0])
+        self._cache.clear()
+        self.contacts = None
+        return b
+
+    def add_box(self, origin, size, material, divisions=(1, 1, 1), **kw):
+        """Add an axis-aligned box block (minimum corner ``origin``, edge lengths ``size``, m)."""
+        size = np.asarray(size, dtype=np.float64)
+        if size.shape != (3,) or not np.all(size > 0):
+            raise ModelError(f"block {self.n_blocks}: box size must be 3 positive lengths, got {size}")
+        return self.add_block(box_corners(origin, size), material, divisions, **kw)
+
+    @staticmethod
+    def _check_corners(b, c):
+        scale = np.max(np.ptp(c, axis=0))
+        if scale <= 0:
+            raise ModelError(f"block {b}: all corners coincide")
+        pts = np.vstack([HEX_NATURAL, np.zeros((1, 3))])
+        det = np.linalg.det(trilinear_jacobian(c, pts)) * 8.0  # volume-like, m^3
+        if np.any(det <= 1e-9 * scale ** 3):
+            bad = int(np.argmin(det))
+            where = f"corner {bad}" if bad < 8 else "centre"
+            raise ModelError(
+                f"block {b}: corners are inverted or degenerate (Jacobian {det[bad]:.3e} m^3 at "
+                f"{where}); give corners 0-3 counter-clockwise seen from +z, 4-7 above them")
+
+    # ------------------------------------------------------------------ arrays
+    def _cat(self, key, fn):
+        if key not in self._cache:
+            self._cache[key] = fn()
+        return self._cache[key]
+
+    @property
+    def n_blocks(self):
+        return len(self._corners)
+
+    @property
+    def n_nodes(self):
+        return self._node_start[-1]
+
+    @property
+    def n_elements(self):
+        return self._elem_start[-1]
+
+    @property
+    def nodes(self):
+        return self._cat("nodes", lambda: np.ascontiguousarray(
+            np.vstack(self._node_chunks) if self._node_chunks else np.zeros((0, 3))))
+
+    @property
+    def elements(self):
+        return self._cat("elements", lambda: np.ascontiguousarray(
+            np.vstack(self._elem_chunks) if self._elem_chunks else np.zeros((0, 8), np.int64)))
+
+    @property
+    def block_node_start(self):
+        return self._cat("bns", lambda: np.asarray(self._node_start, dtype=np.int64))
+
+    @property
+    def block_element_start(self):
+        return self._cat("bes", lambda: np.asarray(self._elem_start, dtype=np.int64))
+
+    @property
+    def element_block(self):
+        return self._cat("eb", lambda: np.repeat(
+            np.arange(self.n_blocks, dtype=np.int64), np.diff(self.block_element_start)))
+
+    @property
+    def node_block(self):
+        return self._cat("nb", lambda: np.repeat(
+            np.arange(self.n_blocks, dtype=np.int64), np.diff(self.block_node_start)))
+
+    @property
+    def block_divisions(self):
+        return self._cat("bd", lambda: np.asarray(self._divisions, dtype=np.int64).reshape(-1, 3))
+
+    @property
+    def block_corners(self):
+        return self._cat("bc", lambda: np.asarray(self._corners, dtype=np.float64).reshape(-1, 8, 3))
+
+    @property
+    def block_material(self):
+        return self._cat("bm", lambda: np.asarray(self._material, dtype=np.int64))
+
+    @property
+    def block_fixed(self):
+        return self._cat("bf", lambda: np.asarray(self._fixed, dtype=bool))
+
+    @property
+    def block_joint(self):
+        return self._cat("bj", lambda: np.asarray(self._joint, dtype=np.int64))
+
+    @property
+    def block_group(self):
+        return list(self._group)
+
+    def block(self, b):
+        """A read-only :class:`Block` view of block ``b``."""
+        if not 0 <= b < self.n_blocks:
+            raise ModelError(f"block {b} does not exist (model has {self.n_blocks} blocks)")
+        s = self._node_start
+        e = self._elem_start
+        return Block(b, slice(s[b], s[b + 1]), slice(e[b], e[b + 1]), self._divisions[b],
+                     self._material[b], self._fixed[b], self._joint[b], self._group[b])
+
+    def block_nodes(self, blocks):
+        """Global node ids (sorted int64 array) of one block id or an iterable of them."""
+        blocks = np.atleast_1d(np.asarray(blocks, dtype=np.int64))
+        s = self.block_node_start
+        return np.concatenate([np.arange(s[b], s[b + 1]) for b in blocks]) if blocks.size \
+            else np.zeros(0, np.int64)
+
+    def block_face(self, b, f):
+        """Surface mesh of face ``f`` (0..5, see ``BLOCK_FACES``) of block ``b``.
+
+        Returns
+        -------
+        grid : (m1 + 1, m2 + 1) int64
+            global node ids of the face nodes, a structured grid.
+        quads : (m1 * m2, 4) int64
+            global node ids of the element faces, ordered so that their normal points out of
+            the block.
+        """
+        axis, side = BLOCK_FACES[f]
+        nx, ny, nz = self._divisions[b]
+        n0 = self._node_start[b]
+        n = (nx + 1, ny + 1, nz + 1)
+        idx = np.arange(n[0] * n[1] * n[2]).reshape(n[2], n[1], n[0]).transpose(2, 1, 0) + n0
+        fixed = 0 if side < 0 else n[axis] - 1
+        grid = np.take(idx, fixed, axis=axis)
+        q = np.column_stack([grid[:-1, :-1].ravel(), grid[1:, :-1].ravel(),
+                             grid[1:, 1:].ravel(), grid[:-1, 1:].ravel()])
+        x = self.nodes
+        centre = x[n0:self._node_start[b + 1]].mean(axis=0)
+        nrm = np.cross(x[q[:, 1]] - x[q[:, 0]], x[q[:, 3]] - x[q[:, 0]])
+        out = np.einsum("ij,ij->i", nrm, x[q].mean(axis=1) - centre) < 0
+        q[out] = q[out][:, ::-1]
+        return grid, q
+
+    def summary(self):
+        """One-line description of the model size."""
+        nc = 0 if self.contacts is None else self.contacts.n
+        return (f"{self.n_blocks} blocks, {self.n_elements} hexahedra, {self.n_nodes} nodes, "
+                f"{nc} contact points")

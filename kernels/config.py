@@ -1,0 +1,13 @@
+"""Numba flags in one place: every kernel is compiled with ``jit`` or ``pjit`` from here."""
+import os
+
+# Threads spin-wait with the OpenMP layer on a loaded machine (PERFORMANCE_NOTES.md): be passive.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+import numba  # noqa: E402
+
+FASTMATH = False  # keep IEEE semantics: NaN detection by the guards must work
+
+jit = numba.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+pjit = numba.njit(cache=True, fastmath=FASTMATH, error_model="numpy", parallel=True)
+prange = numba.prange

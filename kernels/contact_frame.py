@@ -1,0 +1,60 @@
+"""Geometry of one node-to-face contact pair: the master point and its local frame.
+
+The master face is a bilinear quad with nodes ``xq`` (4, 3) ordered so that its normal points out
+of the master block (towards the slave); natural coordinates (r, s) in [-1, 1]^2 with corners
+(-1,-1), (1,-1), (1,1), (-1,1). At (r, s): a1 = dx/dr, a2 = dx/ds, n = a1 x a2 / |a1 x a2|,
+t1 = a1 / |a1|, t2 = n x t1. The local gap of slave position ``xs`` is
+[u, d1, d2] = [(xs - xm) . n, (xs - xm) . t1, (xs - xm) . t2] (m), u > 0 opening.
+"""
+import numpy as np
+
+from .config import jit
+
+
+@jit
+def quad_shape(r, s, out):
+    """Bilinear shape functions of a quad at (r, s) into ``out`` (4,)."""
+    out[0] = 0.25 * (1.0 - r) * (1.0 - s)
+    out[1] = 0.25 * (1.0 + r) * (1.0 - s)
+    out[2] = 0.25 * (1.0 + r) * (1.0 + s)
+    out[3] = 0.25 * (1.0 - r) * (1.0 + s)
+
+
+@jit
+def contact_frame(xq, r, s, xm, frame):
+    """Master point ``xm`` (3,) and frame rows [n, t1, t2] ``frame`` (3, 3) of quad ``xq`` (4, 3) at (r, s).
+
+    Returns the area Jacobian |a1 x a2| (m^2 per unit natural area).
+    """
+    a1 = np.empty(3)
+    a2 = np.empty(3)
+    for k in range(3):
+        xm[k] = 0.25 * ((1.0 - r) * (1.0 - s) * xq[0, k] + (1.0 + r) * (1.0 - s) * xq[1, k]
+                        + (1.0 + r) * (1.0 + s) * xq[2, k] + (1.0 - r) * (1.0 + s) * xq[3, k])
+        a1[k] = 0.25 * ((1.0 - s) * (xq[1, k] - xq[0, k]) + (1.0 + s) * (xq[2, k] - xq[3, k]))
+        a2[k] = 0.25 * ((1.0 - r) * (xq[3, k] - xq[0, k]) + (1.0 + r) * (xq[2, k] - xq[1, k]))
+    nx = a1[1] * a2[2] - a1[2] * a2[1]
+    ny = a1[2] * a2[0] - a1[0] * a2[2]
+    nz = a1[0] * a2[1] - a1[1] * a2[0]
+    jac = np.sqrt(nx * nx + ny * ny + nz * nz)
+    la1 = np.sqrt(a1[0] ** 2 + a1[1] ** 2 + a1[2] ** 2)
+    frame[0, 0] = nx / jac
+    frame[0, 1] = ny / jac
+    frame[0, 2] = nz / jac
+    for k in range(3):
+        frame[1, k] = a1[k] / la1
+    frame[2, 0] = frame[0, 1] * frame[1, 2] - frame[0, 2] * frame[1, 1]
+    frame[2, 1] = frame[0, 2] * frame[1, 0] - frame[0, 0] * frame[1, 2]
+    frame[2, 2] = frame[0, 0] * frame[1, 1] - frame[0, 1] * frame[1, 0]
+    return jac
+
+
+@jit
+def local_gap(xs, xq, r, s, gap):
+    """Local gap ``gap`` (3,) = [u, d1, d2] (m) of slave point ``xs`` against quad ``xq`` at (r, s)."""
+    xm = np.empty(3)
+    frame = np.empty((3, 3))
+    contact_frame(xq, r, s, xm, frame)
+    for a in range(3):
+        gap[a] = ((xs[0] - xm[0]) * frame[a, 0] + (xs[1] - xm[1]) * frame[a, 1]
+                  + (xs[2] - xm[2]) * frame[a, 2])
