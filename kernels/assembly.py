@@ -1,0 +1,49 @@
+"""Race-free assembly: per-item force buffers gathered per node through a CSR map.
+
+Elements write their corner forces to an (n_elements * 8, 3) buffer and contact points their five
+node forces to an (n_contacts * 5, 3) buffer; each node then sums the rows that belong to it.
+Every node is written by exactly one thread, so the result is deterministic.
+"""
+import numpy as np
+
+from .config import pjit, prange
+
+
+def node_row_map(items, n_nodes):
+    """CSR map from nodes to the rows of a flattened per-item buffer.
+
+    Parameters
+    ----------
+    items : (n_items, k) int64
+        node ids of each item (hexahedron corners, contact nodes); entries < 0 are skipped.
+    n_nodes : int
+
+    Returns
+    -------
+    ptr : (n_nodes + 1,) int64, rows : (n_items * k,) int64
+        rows ``rows[ptr[i]:ptr[i+1]]`` of the (n_items * k, 3) buffer belong to node i.
+    """
+    flat = np.asarray(items, dtype=np.int64).ravel()
+    keep = np.nonzero(flat >= 0)[0]
+    order = keep[np.argsort(flat[keep], kind="stable")]
+    counts = np.bincount(flat[keep], minlength=n_nodes)
+    ptr = np.zeros(n_nodes + 1, dtype=np.int64)
+    np.cumsum(counts, out=ptr[1:])
+    return ptr, order.astype(np.int64)
+
+
+@pjit
+def gather_add(buf, ptr, rows, out):
+    """``out[i] += sum(buf[rows[ptr[i]:ptr[i+1]]])`` for every node i; buf (m, 3), out (n, 3)."""
+    for i in prange(out.shape[0]):
+        a0 = 0.0
+        a1 = 0.0
+        a2 = 0.0
+        for q in range(ptr[i], ptr[i + 1]):
+            r = rows[q]
+            a0 += buf[r, 0]
+            a1 += buf[r, 1]
+            a2 += buf[r, 2]
+        out[i, 0] += a0
+        out[i, 1] += a1
+        out[i, 2] += a2

@@ -1,0 +1,339 @@
+"""Total-Lagrangian 8-node hexahedron: geometry, internal forces, lumped mass, stiffness bound.
+
+Conventions
+-----------
+* Corner order is VTK's (``CORNERS[a]`` = natural coordinates of corner a, equal to
+  ``dr_masonry.model.HEX_NATURAL``).
+* 2x2x2 Gauss rule, unit weights; Gauss point g sits at ``CORNERS[g] / sqrt(3)``.
+* ``dN`` (ne, 8, 8, 3) 1/m: dN_a/dX_i in the reference configuration, indexed
+  [element, gauss point, node, direction]; ``wdet`` (ne, 8) m^3: Gauss weight x det(dX/dxi).
+* Deformation gradient F = I + sum_a u_a (x) dN_a; Green-Lagrange strain
+  E = (H + H^T + H^T H) / 2 with H = F - I (no cancellation at small strain), Voigt order
+  [xx, yy, zz, yz, xz, xy] with engineering shears; the material returns the second
+  Piola-Kirchhoff stress S (Pa) in the same order; nodal internal force
+  f_a = sum_g wdet_g F S dN_a (N).
+"""
+import numpy as np
+
+from .config import jit, pjit, prange
+from .plastic_damage import MP_ELASTIC, MS_EPSP, gp_update
+
+CORNERS = np.array(
+    [[-1, -1, -1], [1, -1, -1], [1, 1, -1], [-1, 1, -1],
+     [-1, -1, 1], [1, -1, 1], [1, 1, 1], [-1, 1, 1]], dtype=np.float64)
+#: natural coordinates of the 8 Gauss points (8, 3)
+GAUSS = CORNERS / np.sqrt(3.0)
+#: shape functions at the Gauss points (8 gauss points, 8 nodes)
+N_GAUSS = 0.125 * np.prod(1.0 + GAUSS[:, None, :] * CORNERS[None, :, :], axis=2)
+
+_CHUNK = 64  # elements per parallel work item (local scratch arrays allocated once per item)
+
+
+class HexMeshError(ValueError):
+    """Invalid hexahedral mesh input; the message names the parameter, element and value."""
+
+
+# ---------------------------------------------------------------------------- geometry
+@jit
+def hex_gauss_derivatives(xe, g, dng):
+    """Reference derivatives at Gauss point ``g`` of the hexahedron with corners ``xe`` (8, 3) m.
+
+    Writes ``dng`` (8, 3) 1/m = dN_a/dX_i and returns det(dX/dxi) (m^3 per unit natural volume).
+    """
+    r, s, t = GAUSS[g, 0], GAUSS[g, 1], GAUSS[g, 2]
+    j00 = j01 = j02 = j10 = j11 = j12 = j20 = j21 = j22 = 0.0
+    for a in range(8):
+        ca, cb, cc = CORNERS[a, 0], CORNERS[a, 1], CORNERS[a, 2]
+        fr, fs, ft = 1.0 + ca * r, 1.0 + cb * s, 1.0 + cc * t
+        d0 = 0.125 * ca * fs * ft
+        d1 = 0.125 * cb * fr * ft
+        d2 = 0.125 * cc * fr * fs
+        dng[a, 0], dng[a, 1], dng[a, 2] = d0, d1, d2
+        j00 += xe[a, 0] * d0
+        j01 += xe[a, 0] * d1
+        j02 += xe[a, 0] * d2
+        j10 += xe[a, 1] * d0
+        j11 += xe[a, 1] * d1
+        j12 += xe[a, 1] * d2
+        j20 += xe[a, 2] * d0
+        j21 += xe[a, 2] * d1
+        j22 += xe[a, 2] * d2
+    c00 = j11 * j22 - j12 * j21
+    c01 = j12 * j20 - j10 * j22
+    c02 = j10 * j21 - j11 * j20
+    det = j00 * c00 + j01 * c01 + j02 * c02
+    # inverse K = J^-1 (K[k, i] = dxi_k / dX_i), as cofactors / det
+    k00, k10, k20 = c00 / det, c01 / det, c02 / det
+    k01 = (j02 * j21 - j01 * j22) / det
+    k11 = (j00 * j22 - j02 * j20) / det
+    k21 = (j01 * j20 - j00 * j21) / det
+    k02 = (j01 * j12 - j02 * j11) / det
+    k12 = (j02 * j10 - j00 * j12) / det
+    k22 = (j00 * j11 - j01 * j10) / det
+    for a in range(8):
+        d0, d1, d2 = dng[a, 0], dng[a, 1], dng[a, 2]
+        dng[a, 0] = d0 * k00 + d1 * k10 + d2 * k20
+        dng[a, 1] = d0 * k01 + d1 * k11 + d2 * k21
+        dng[a, 2] = d0 * k02 + d1 * k12 + d2 * k22
+    return det
+
+
+@pjit
+def _hex_geometry(X, conn, dN, wdet, h):
+    """Fill ``dN``, ``wdet`` (det J, unit weights) and ``h`` for every element (parallel)."""
+    ne = conn.shape[0]
+    for e in prange(ne):
+        xe = np.empty((8, 3))
+        for a in range(8):
+            for i in range(3):
+                xe[a, i] = X[conn[e, a], i]
+        vol = 0.0
+        for g in range(8):
+            wdet[e, g] = hex_gauss_derivatives(xe, g, dN[e, g])
+            vol += wdet[e, g]
+        h[e] = np.cbrt(vol) if vol > 0.0 else 0.0
+
+
+def _check_mesh(X, conn):
+    X = np.ascontiguousarray(X, dtype=np.float64)
+    if X.ndim != 2 or X.shape[1] != 3:
+        raise HexMeshError(f"X must have shape (n_nodes, 3), got {X.shape}")
+    if not np.all(np.isfinite(X)):
+        raise HexMeshError("X contains NaN or Inf")
+    c = np.asarray(conn)
+    if c.ndim != 2 or c.shape[1] != 8 or not np.issubdtype(c.dtype, np.integer):
+        raise HexMeshError(f"conn must be an integer array of shape (n_elements, 8), got "
+                           f"{c.dtype} {c.shape}")
+    if c.size and (c.min() < 0 or c.max() >= X.shape[0]):
+        bad = int(np.argmax(np.any((c < 0) | (c >= X.shape[0]), axis=1)))
+        raise HexMeshError(f"conn: element {bad} has node ids {c[bad].tolist()} outside "
+                           f"[0, {X.shape[0]})")
+    return X, np.ascontiguousarray(c, dtype=np.int64)
+
+
+def hex_geometry(X, conn):
+    """Reference-configuration geometry of hexahedra at the 2x2x2 Gauss points.
+
+    Parameters
+    ----------
+    X : (n_nodes, 3) float64, m
+        reference coordinates.
+    conn : (ne, 8) int
+        node ids per element, VTK corner order.
+
+    Returns
+    -------
+    dN : (ne, 8, 8, 3) float64, 1/m
+        dN_a/dX_i [element, gauss point, node, direction].
+    wdet : (ne, 8) float64, m^3
+        Gauss weight x det J (sums to the element volume).
+    h : (ne,) float64, m
+        characteristic length, cube root of the element volume.
+
+    Raises
+    ------
+    HexMeshError
+        on malformed input or a non-positive Jacobian at a Gauss point (names the element).
+    """
+    X, conn = _check_mesh(X, conn)
+    ne = conn.shape[0]
+    dN = np.empty((ne, 8, 8, 3))
+    wdet = np.empty((ne, 8))
+    h = np.empty(ne)
+    _hex_geometry(X, conn, dN, wdet, h)
+    bad = ~(wdet > 0.0)
+    if np.any(bad):
+        e, g = np.argwhere(bad)[0]
+        raise HexMeshError(f"conn: element {e} (nodes {conn[e].tolist()}) has a non-positive "
+                           f"Jacobian det = {wdet[e, g]:.6g} at Gauss point {g} (inverted or "
+                           f"degenerate hexahedron, or corners not in VTK order)")
+    return dN, wdet, h
+
+
+# ---------------------------------------------------------------------------- internal forces
+@jit
+def hex_gauss_strain(ue, dng, F, eps):
+    """Deformation gradient ``F`` (3, 3) and Green-Lagrange strain ``eps`` (6,) at one Gauss point.
+
+    ``ue`` (8, 3) m nodal displacements, ``dng`` (8, 3) 1/m reference derivatives.
+    ``eps`` in Voigt order [xx, yy, zz, yz, xz, xy], engineering shears.
+    """
+    h00 = h01 = h02 = h10 = h11 = h12 = h20 = h21 = h22 = 0.0  # H = grad u = F - I
+    for a in range(8):
+        d0, d1, d2 = dng[a, 0], dng[a, 1], dng[a, 2]
+        u0, u1, u2 = ue[a, 0], ue[a, 1], ue[a, 2]
+        h00 += u0 * d0
+        h01 += u0 * d1
+        h02 += u0 * d2
+        h10 += u1 * d0
+        h11 += u1 * d1
+        h12 += u1 * d2
+        h20 += u2 * d0
+        h21 += u2 * d1
+        h22 += u2 * d2
+    eps[0] = h00 + 0.5 * (h00 * h00 + h10 * h10 + h20 * h20)
+    eps[1] = h11 + 0.5 * (h01 * h01 + h11 * h11 + h21 * h21)
+    eps[2] = h22 + 0.5 * (h02 * h02 + h12 * h12 + h22 * h22)
+    eps[3] = h12 + h21 + h01 * h02 + h11 * h12 + h21 * h22
+    eps[4] = h02 + h20 + h00 * h02 + h10 * h12 + h20 * h22
+    eps[5] = h01 + h10 + h00 * h01 + h10 * h11 + h20 * h21
+    F[0, 0], F[0, 1], F[0, 2] = 1.0 + h00, h01, h02
+    F[1, 0], F[1, 1], F[1, 2] = h10, 1.0 + h11, h12
+    F[2, 0], F[2, 1], F[2, 2] = h20, h21, 1.0 + h22
+
+
+@jit
+def hex_add_gauss_force(F, sig, dng, w, fe):
+    """Add the Gauss point's contribution w F S dN_a to the element forces ``fe`` (8, 3) N.
+
+    ``F`` (3, 3) deformation gradient, ``sig`` (6,) Pa second Piola-Kirchhoff stress (Voigt),
+    ``dng`` (8, 3) 1/m, ``w`` m^3 weight x det J.
+    """
+    s00, s11, s22, s12, s02, s01 = sig[0], sig[1], sig[2], sig[3], sig[4], sig[5]
+    for i in range(3):
+        f0, f1, f2 = w * F[i, 0], w * F[i, 1], w * F[i, 2]
+        p0 = f0 * s00 + f1 * s01 + f2 * s02
+        p1 = f0 * s01 + f1 * s11 + f2 * s12
+        p2 = f0 * s02 + f1 * s12 + f2 * s22
+        for a in range(8):
+            fe[a, i] += p0 * dng[a, 0] + p1 * dng[a, 1] + p2 * dng[a, 2]
+
+
+@pjit
+def hex_forces(U, conn, active, dN, wdet, h, elem_mat, params, s_old, s_new, f_elem, energy):
+    """Internal forces and stored elastic energy of the ``active`` elements (parallel, race-free).
+
+    Parameters
+    ----------
+    U : (n_nodes, 3) float64, m
+        nodal displacements.
+    conn : (ne, 8) int64
+        node ids per element.
+    active : (na,) int64
+        element ids to compute; other elements are untouched.
+    dN, wdet, h
+        from :func:`hex_geometry`.
+    elem_mat : (ne,) int64
+        row of ``params`` for each element.
+    params : (nmat, NMP) float64
+        ``PlasticDamage.params_array()`` rows.
+    s_old, s_new : (ne, 8, NMS) float64
+        committed (read) and trial (written by ``gp_update``; not for elastic materials)
+        Gauss-point states.
+    f_elem : (ne, 8, 3) float64, N
+        element internal forces, written.
+    energy : (ne,) float64, J
+        stored elastic energy sum_g wdet 0.5 S : (E - E_p), written (E_p = 0 for a
+        material with ``p[MP_ELASTIC] == 1``).
+    """
+    na = active.shape[0]
+    nchunk = (na + _CHUNK - 1) // _CHUNK
+    for c in prange(nchunk):
+        ue = np.empty((8, 3))
+        F = np.empty((3, 3))
+        eps = np.empty(6)
+        sig = np.empty(6)
+        for k in range(c * _CHUNK, min(na, (c + 1) * _CHUNK)):
+            e = active[k]
+            fe = f_elem[e]
+            for a in range(8):
+                n = conn[e, a]
+                for i in range(3):
+                    ue[a, i] = U[n, i]
+                    fe[a, i] = 0.0
+            p = params[elem_mat[e]]
+            plastic = p[MP_ELASTIC] != 1.0  # the elastic fast path writes no state
+            he = h[e]
+            en = 0.0
+            for g in range(8):
+                dng = dN[e, g]
+                so = s_old[e, g]
+                sn = s_new[e, g]
+                hex_gauss_strain(ue, dng, F, eps)
+                gp_update(p, he, eps, so, sn, sig)
+                w = wdet[e, g]
+                hex_add_gauss_force(F, sig, dng, w, fe)
+                acc = 0.0
+                for m in range(6):
+                    acc += sig[m] * eps[m]
+                    if plastic:
+                        acc -= sig[m] * sn[MS_EPSP + m]
+                en += 0.5 * w * acc
+            energy[e] = en
+
+
+# ---------------------------------------------------------------------------- mass
+def lumped_mass(conn, wdet, rho_elem, n_nodes):
+    """Row-sum lumped nodal masses m_a = sum_e rho_e int N_a dV (kg), shape (n_nodes,).
+
+    Equals rho V / 8 per corner for parallelepipeds; the total is rho V for any hexahedron.
+    ``conn`` (ne, 8) int, ``wdet`` (ne, 8) m^3, ``rho_elem`` (ne,) kg/m^3.
+    """
+    rho = np.asarray(rho_elem, dtype=np.float64)
+    if rho.shape != (wdet.shape[0],) or not np.all(rho > 0.0) or not np.all(np.isfinite(rho)):
+        raise HexMeshError(f"rho_elem must be ({wdet.shape[0]},) positive finite densities, got "
+                           f"shape {rho.shape}, min {rho.min() if rho.size else None}")
+    me = rho[:, None] * (wdet @ N_GAUSS)
+    return np.bincount(np.asarray(conn).ravel(), weights=me.ravel(), minlength=n_nodes)
+
+
+# ---------------------------------------------------------------------------- stiffness
+@jit
+def hex_stiffness(dne, we, E, nu, ke):
+    """Linear elastic stiffness ``ke`` (24, 24) N/m of one element at the reference state.
+
+    ``dne`` (8, 8, 3) 1/m, ``we`` (8,) m^3 of the element; ``E`` Pa, ``nu``. Dof order 3 a + i.
+    K_ai,bj = sum_g w (lam dN_a,i dN_b,j + mu dN_a,j dN_b,i + mu delta_ij dN_a . dN_b).
+    """
+    lam = E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu))
+    mu = 0.5 * E / (1.0 + nu)
+    ke[:, :] = 0.0
+    for g in range(8):
+        w = we[g]
+        for a in range(8):
+            for b in range(8):
+                dd = mu * (dne[g, a, 0] * dne[g, b, 0] + dne[g, a, 1] * dne[g, b, 1]
+                           + dne[g, a, 2] * dne[g, b, 2])
+                for i in range(3):
+                    ke[3 * a + i, 3 * b + i] += w * dd
+                    for j in range(3):
+                        ke[3 * a + i, 3 * b + j] += w * (lam * dne[g, a, i] * dne[g, b, j]
+                                                         + mu * dne[g, a, j] * dne[g, b, i])
+
+
+@pjit
+def _stiffness_rowsum_elem(dN, wdet, E, nu, r):
+    """Per element corner bound ``r`` (ne, 8): max over the corner's 3 dofs of sum_j |K_ij|."""
+    ne = dN.shape[0]
+    for e in prange(ne):
+        ke = np.empty((24, 24))
+        hex_stiffness(dN[e], wdet[e], E[e], nu[e], ke)
+        for a in range(8):
+            best = 0.0
+            for i in range(3):
+                s = 0.0
+                for j in range(24):
+                    s += abs(ke[3 * a + i, j])
+                best = max(best, s)
+            r[e, a] = best
+
+
+def stiffness_rowsum(conn, dN, wdet, E, nu, n_nodes):
+    """Gershgorin bound of the assembled linear stiffness per node (N/m), shape (n_nodes,).
+
+    For each element, the absolute row sums of its 24x24 reference stiffness, max over the
+    node's 3 dofs, summed over the node's elements: bounds every row sum of the assembled K.
+    ``E`` (ne,) Pa and ``nu`` (ne,) per element.
+    """
+    ne = dN.shape[0]
+    E = np.ascontiguousarray(E, dtype=np.float64)
+    nu = np.ascontiguousarray(nu, dtype=np.float64)
+    if E.shape != (ne,) or not np.all(E > 0.0) or not np.all(np.isfinite(E)):
+        raise HexMeshError(f"E must be ({ne},) positive finite Young's moduli, got shape "
+                           f"{E.shape}")
+    if nu.shape != (ne,) or not np.all((nu > -1.0) & (nu < 0.5)):
+        raise HexMeshError(f"nu must be ({ne},) Poisson ratios in (-1, 0.5), got shape "
+                           f"{nu.shape}")
+    r = np.empty((ne, 8))
+    _stiffness_rowsum_elem(dN, wdet, E, nu, r)
+    return np.bincount(np.asarray(conn).ravel(), weights=r.ravel(), minlength=n_nodes)
