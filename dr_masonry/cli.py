@@ -1,0 +1,125 @@
+"""Command line: ``dr-masonry run | vtk | info | list`` (also ``python -m dr_masonry``).
+
+``run <case> [key=value ...]``  run ``dr_masonry.cases.<case>`` with parameter overrides
+``vtk <result.h5> [out_dir]``   write the VTK time series (.vtu + .pvd)
+``info <result.h5> [--peak KEY ...]``  model size, configuration, increments, frames, last row
+``list``                        the cases available
+
+Case scripts parse their ``key=value`` arguments with :func:`dr_masonry.params.parse_overrides`.
+"""
+from __future__ import annotations
+
+import os
+
+# Threads spin-wait with the OpenMP layer on a loaded machine: be passive (before Numba loads).
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+import argparse  # noqa: E402
+import importlib  # noqa: E402
+import json  # noqa: E402
+import pkgutil  # noqa: E402
+import sys  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+from .params import ParameterError  # noqa: E402
+
+
+def available_cases():
+    """Names of the case modules in ``dr_masonry.cases``, sorted."""
+    import dr_masonry.cases as cases
+    return sorted(m.name for m in pkgutil.iter_modules(cases.__path__)
+                  if not m.name.startswith("_"))
+
+
+def _cmd_run(args):
+    name = args.case
+    try:
+        mod = importlib.import_module(f"dr_masonry.cases.{name}")
+    except ModuleNotFoundError as e:
+        if e.name != f"dr_masonry.cases.{name}":
+            raise
+        raise ParameterError(f"unknown case {name!r}; available: "
+                         f"{', '.join(available_cases()) or '(none)'}") from None
+    if not hasattr(mod, "main"):
+        raise ParameterError(f"case {name!r} has no main(argv)")
+    rc = mod.main(list(args.overrides))
+    return rc if isinstance(rc, int) else 0
+
+
+def _cmd_vtk(args):
+    from dr_masonry.viz.vtk_series import export_vtk
+    print(export_vtk(args.result, args.out_dir, warp=args.warp))
+    return 0
+
+
+def _cmd_info(args):
+    from dr_masonry.results import open_result
+    r = open_result(args.result)
+    print(f"file:      {r.path}")
+    print(f"code:      dr_masonry {r.attrs['code_version']}, schema {r.attrs['schema_version']}, "
+          f"created {r.attrs['created']}, {len(r.attrs['restarts'])} restart(s)")
+    print(f"model:     {r.summary()}")
+    print("groups:    " + ", ".join(f"{k} ({len(v)})" for k, v in r.groups.items()))
+    print(f"config:    {json.dumps(r.config, indent=2, sort_keys=True)}")
+    print(f"history:   {r.n_history} rows, columns {list(r.history)}")
+    ids = r.frame_ids
+    print(f"frames:    {r.n_frames}" + (f" (increments {ids[0]} .. {ids[-1]})" if ids else ""))
+    if r.n_history:
+        print("last row:  " + ", ".join(f"{k}={v[-1]:.6g}" for k, v in r.history.items()))
+        unknown = [k for k in args.peak if k not in r.history]
+        if unknown:
+            raise ParameterError(f"info --peak: no history column {unknown}; columns are "
+                             f"{list(r.history)}")
+        for k in args.peak or r.history:
+            v = r.history[k]
+            i, j = int(np.argmax(v)), int(np.argmin(v))
+            print(f"peak {k}: max {v[i]:.6g} (row {i}), min {v[j]:.6g} (row {j})")
+    return 0
+
+
+def _cmd_list(args):
+    for name in available_cases():
+        try:
+            mod = importlib.import_module(f"dr_masonry.cases.{name}")
+            first = (mod.__doc__ or "").strip().splitlines()
+            print(f"{name:<20} {first[0] if first else ''}")
+        except Exception as e:  # a broken case must not hide the others
+            print(f"{name:<20} (cannot import: {type(e).__name__}: {e})")
+    return 0
+
+
+def _parser():
+    p = argparse.ArgumentParser(prog="dr-masonry", description=__doc__.splitlines()[0])
+    sub = p.add_subparsers(dest="command", required=True)
+    s = sub.add_parser("run", help="run a case: run <case> [key=value ...] (run <case> --help)",
+                       add_help=False)
+    s.add_argument("case")
+    s.add_argument("overrides", nargs=argparse.REMAINDER)
+    s.set_defaults(func=_cmd_run)
+    s = sub.add_parser("vtk", help="write the VTK time series of a results file")
+    s.add_argument("result")
+    s.add_argument("out_dir", nargs="?")
+    s.add_argument("--warp", type=float, default=1.0, help="displacement scale (0: reference)")
+    s.set_defaults(func=_cmd_vtk)
+    s = sub.add_parser("info", help="summary of a results file")
+    s.add_argument("result")
+    s.add_argument("--peak", nargs="*", default=[], metavar="KEY",
+                   help="history columns to report max/min of (default all)")
+    s.set_defaults(func=_cmd_info)
+    s = sub.add_parser("list", help="list the cases")
+    s.set_defaults(func=_cmd_list)
+    return p
+
+
+def main(argv=None):
+    """Entry point of ``dr-masonry``; returns the exit status (2 on bad input)."""
+    args = _parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except ValueError as e:
+        if type(e) is ValueError:  # not one of the project's input errors: keep the traceback
+            raise
+        # ParameterError, ResultsError, ModelError, ...: the message says what is wrong
+        print(f"dr-masonry {args.command}: error: {e}", file=sys.stderr)
+        return 2

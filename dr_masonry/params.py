@@ -1,0 +1,104 @@
+"""Scene parameters: ``key=value`` overrides of a case's PARAMS defaults, checked and typed."""
+import ast
+import json
+
+import sys
+
+_TRUE = {"1", "true", "yes", "on"}
+_FALSE = {"0", "false", "no", "off"}
+
+
+class ParameterError(ValueError):
+    """A bad ``key=value`` override; the message names the key, the value and what is valid."""
+
+
+def _coerce(key, text, default):
+    """Convert ``text`` to the type of ``default``."""
+    try:
+        if isinstance(default, bool):
+            low = text.strip().lower()
+            if low in _TRUE | _FALSE:
+                return low in _TRUE
+            raise ValueError(f"expected one of {sorted(_TRUE | _FALSE)}")
+        if isinstance(default, int):
+            v = float(text) if any(c in text for c in ".eE") else int(text)
+            if isinstance(v, float) and not v.is_integer():
+                raise ValueError("expected an integer")
+            return int(v)
+        if isinstance(default, float):
+            return float(text)
+        if isinstance(default, str):
+            return text
+        if isinstance(default, (list, tuple)):
+            items = [s for s in text.strip("[]()").split(",") if s.strip()]
+            ref = default[0] if len(default) else ""
+            out = [_coerce(key, s.strip(), ref) for s in items]
+            return type(default)(out)
+        if isinstance(default, dict):
+            v = json.loads(text)
+            if not isinstance(v, dict):
+                raise ValueError("expected a JSON object")
+            return v
+        try:                     # None or another type: a Python literal, else the string
+            return ast.literal_eval(text)
+        except (ValueError, SyntaxError):
+            return text
+    except ParameterError:
+        raise
+    except (ValueError, json.JSONDecodeError) as e:
+        raise ParameterError(f"parameter {key}={text!r}: cannot convert to "
+                         f"{type(default).__name__} like the default {default!r} ({e})") from None
+
+
+def format_params(params):
+    """The parameters as aligned ``key = value`` lines."""
+    w = max((len(k) for k in params), default=0)
+    return "\n".join(f"  {k:<{w}} = {v!r}" for k, v in params.items())
+
+
+def parse_overrides(params, argv=None, doc=None):
+    """Defaults ``params`` updated by ``key=value`` arguments.
+
+    Parameters
+    ----------
+    params : dict
+        the case's PARAMS (defaults; their types drive the conversion: bool accepts
+        true/false/yes/no/on/off/1/0, int accepts ``1e3``, list/tuple a comma-separated list
+        of the first element's type, dict JSON, None any Python literal or a string).
+    argv : list of str, optional
+        the arguments (default ``sys.argv[1:]``). ``-h``/``--help`` prints ``doc`` and the
+        defaults and exits (SystemExit 0).
+    doc : str, optional
+        the case's docstring for ``--help``.
+
+    Returns
+    -------
+    dict
+        a new dict (``params`` is not modified).
+
+    Raises
+    ------
+    ParameterError
+        an argument that is not ``key=value``, an unknown key (the message lists the valid keys)
+        or a value that does not convert.
+    """
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if any(a in ("-h", "--help") for a in argv):
+        print((doc or "").strip())
+        print("\nParameters (override with key=value):")
+        print(format_params(params))
+        raise SystemExit(0)
+    out = dict(params)
+    for arg in argv:
+        key, sep, text = arg.partition("=")
+        key = key.strip()
+        if not sep or not key:
+            raise ParameterError(f"argument {arg!r} is not key=value; valid keys: "
+                             f"{', '.join(params)}")
+        if key not in params:
+            raise ParameterError(f"unknown parameter {key!r}; valid keys: {', '.join(params)}")
+        out[key] = _coerce(key, text, params[key])
+    return out
+
+
+# ---------------------------------------------------------------------- commands

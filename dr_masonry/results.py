@@ -1,0 +1,448 @@
+"""The HDF5 results file: write (append + flush), read, restart.
+
+The schema is documented in ``docs/file_format.md``; :data:`SCHEMA_VERSION` is stored in the file
+and checked on reading. Every write is followed by a flush, so a run that is killed leaves a file
+that opens and holds every row and frame written before the kill. The file is written with the
+HDF5 1.8 format (``libver=("v108", "v108")``): the 1.10+ format marks a file "open for write" in its
+superblock and refuses to open it after a crash without ``h5clear``.
+
+Units are SI: displacements and gaps in m, tractions in Pa, forces in N.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import time
+from importlib import metadata
+
+import h5py
+import numpy as np
+
+#: version of the layout described in docs/file_format.md; bump on any incompatible change
+SCHEMA_VERSION = 1
+#: value of the root attribute ``format``
+FORMAT_NAME = "dr_masonry-result"
+LIBVER = ("v108", "v108")
+
+#: standard frame fields: name -> (location, trailing shape, units, description)
+STANDARD_FIELDS = {
+    "U": ("node", (3,), "m", "nodal displacement"),
+    "dt": ("element", (), "1", "maximum block tensile damage over the Gauss points"),
+    "dc": ("element", (), "1", "maximum block compressive damage over the Gauss points"),
+    "D": ("contact", (), "1", "joint damage"),
+    "opening": ("contact", (), "m", "normal gap u (positive opening)"),
+    "slip": ("contact", (), "m", "tangential gap magnitude sqrt(d1^2 + d2^2)"),
+    "sigma": ("contact", (), "Pa", "normal traction (positive tension)"),
+    "tau": ("contact", (), "Pa", "tangential traction magnitude"),
+}
+
+#: model arrays written to /model: attribute name on Model -> dtype
+MODEL_ARRAYS = {
+    "nodes": np.float64, "elements": np.int64, "element_block": np.int64,
+    "block_node_start": np.int64, "block_element_start": np.int64,
+    "block_divisions": np.int64, "block_corners": np.float64, "block_material": np.int64,
+    "block_fixed": np.bool_, "block_joint": np.int64,
+}
+#: contact-set arrays written to /model/contacts (``gap0`` only when the set has it)
+CONTACT_ARRAYS = {
+    "slave": np.int64, "master": np.int64, "xi": np.float64, "area": np.float64,
+    "law": np.int64, "blocks": np.int64, "gap0": np.float64,
+}
+
+
+class ResultsError(ValueError):
+    """A results file that cannot be written or read as asked; the message says why."""
+
+
+def code_version():
+    """Installed version of dr_masonry ("unknown" when it is not installed)."""
+    try:
+        return metadata.version("dr_masonry")
+    except metadata.PackageNotFoundError:
+        return "unknown"
+
+
+def _describe(obj):
+    """JSON-ready description of a material / joint law: type name and its fields."""
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        return {"type": type(obj).__name__, "params": dataclasses.asdict(obj)}
+    return {"type": type(obj).__name__, "repr": repr(obj)}
+
+
+def _json(obj):
+    return json.dumps(obj, default=lambda o: o.tolist() if hasattr(o, "tolist") else repr(o))
+
+
+def _frame_name(increment):
+    return f"{int(increment):06d}"
+
+
+class ResultWriter:
+    """Writer of one results file.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        the ``.h5`` file.
+    model : Model or None
+        the model; written to ``/model`` in mode ``"w"``. In mode ``"a"`` it may be None, else its
+        sizes must match the file's.
+    config : dict
+        the full input configuration (JSON-serialisable; other values are stored as ``repr``).
+        In mode ``"a"`` it is appended to ``/config`` attribute ``restarts``.
+    mode : {"w", "a"}
+        ``"w"`` creates (truncates) the file; ``"a"`` opens an existing one to continue its history
+        and frames (restart).
+    """
+
+    def __init__(self, path, model, config, mode="w"):
+        self.path = os.fspath(path)
+        if mode == "w":
+            if model is None:
+                raise ResultsError("ResultWriter: mode 'w' needs a model, got None")
+            self._f = h5py.File(self.path, "w", libver=LIBVER)
+            try:
+                self._create(model, config)
+            except BaseException:
+                self._f.close()
+                raise
+        elif mode == "a":
+            check_file(self.path)
+            self._f = h5py.File(self.path, "a", libver=LIBVER)
+            self._sizes = json.loads(self._f["model"].attrs["sizes"])
+            if model is not None:
+                got = _model_sizes(model)
+                if got != self._sizes:
+                    self._f.close()
+                    raise ResultsError(f"ResultWriter: model sizes {got} do not match file "
+                                       f"{self.path} sizes {self._sizes}")
+            cfg = self._f["config"]
+            restarts = json.loads(cfg.attrs.get("restarts", "[]"))
+            restarts.append({"time": time.strftime("%Y-%m-%dT%H:%M:%S"), "code_version": code_version(),
+                             "config": json.loads(_json(config))})
+            cfg.attrs["restarts"] = _json(restarts)
+        else:
+            raise ResultsError(f"ResultWriter: mode must be 'w' or 'a', got {mode!r}")
+        self.flush()
+
+    # ------------------------------------------------------------------ creation
+    def _create(self, model, config):
+        f = self._f
+        f.attrs["format"] = FORMAT_NAME
+        f.attrs["created"] = time.strftime("%Y-%m-%dT%H:%M:%S")
+        cfg = f.create_group("config")
+        cfg.attrs["json"] = _json(config)
+        cfg.attrs["code_version"] = code_version()
+        cfg.attrs["schema_version"] = SCHEMA_VERSION
+        m = f.create_group("model")
+        arrays, names = model_arrays(model)
+        for name, arr in arrays.items():
+            m.create_dataset(name, data=arr)
+        m.attrs["group_names"] = _json(names)
+        m.attrs["materials"] = _json([_describe(x) for x in model.materials])
+        m.attrs["joint_laws"] = _json([_describe(x) for x in model.joint_laws])
+        m.attrs["default_joint"] = int(model.default_joint)
+        if model.contacts is not None:
+            _write_contacts(m.create_group("contacts"), model.contacts)
+        self._sizes = _model_sizes(model)
+        m.attrs["sizes"] = _json(self._sizes)
+        f.create_group("history")
+        f.create_group("frames")
+
+    # ------------------------------------------------------------------ writing
+    def append_history(self, row):
+        """Append one row ``{key: float}`` to ``/history`` (keys fixed by the first row)."""
+        h = self._f["history"]
+        cols = _columns(h)
+        if not cols:
+            if not row:
+                raise ResultsError("append_history: the first row is empty")
+            bad = [k for k in row if not isinstance(k, str) or not k or "/" in k or k == "."]
+            if bad:
+                raise ResultsError(f"append_history: invalid column names {bad}")
+            for k in row:
+                h.create_dataset(k, shape=(0,), maxshape=(None,), dtype=np.float64, chunks=(1024,))
+            cols = list(row)
+            h.attrs["columns"] = _json(cols)
+        elif set(row) != set(cols):
+            missing = sorted(set(cols) - set(row))
+            extra = sorted(set(row) - set(cols))
+            raise ResultsError(f"append_history: row keys differ from the file's columns "
+                               f"(missing {missing}, unknown {extra}); columns are {cols}")
+        values = {}
+        for k in cols:
+            try:
+                values[k] = float(row[k])
+            except (TypeError, ValueError):
+                raise ResultsError(f"append_history: column {k!r} value {row[k]!r} is not a number") \
+                    from None
+        n = h[cols[0]].shape[0]
+        for k, v in values.items():
+            h[k].resize((n + 1,))
+            h[k][n] = v
+        self.flush()
+
+    @property
+    def n_history(self):
+        """Number of history rows written."""
+        h = self._f["history"]
+        cols = _columns(h)
+        return int(h[cols[0]].shape[0]) if cols else 0
+
+    @property
+    def frame_ids(self):
+        """Increments of the frames written, ascending."""
+        return sorted(int(k) for k in self._f["frames"])
+
+    def write_frame(self, increment, fields, attrs=None, contacts=None):
+        """Write the frame of load increment ``increment`` (int >= 0).
+
+        Parameters
+        ----------
+        fields : dict of str -> ndarray
+            standard names (:data:`STANDARD_FIELDS`) must have their standard shape; other names
+            need a leading dimension of n_nodes, n_elements or n_contacts.
+        attrs : dict, optional
+            scalar attributes of the frame, e.g. ``time``, ``control`` (the load factor or
+            controlled displacement).
+        contacts : ContactSet, optional
+            the contact set of this frame when it differs from ``/model/contacts`` (re-detection);
+            contact fields are then sized by it.
+        """
+        inc = int(increment)
+        if inc < 0:
+            raise ResultsError(f"write_frame: increment must be >= 0, got {increment}")
+        frames = self._f["frames"]
+        name = _frame_name(inc)
+        if name in frames:
+            raise ResultsError(f"write_frame: frame {inc} already exists in {self.path}")
+        sizes = dict(self._sizes)
+        if contacts is not None:
+            sizes["contact"] = int(np.asarray(contacts.slave).shape[0])
+        checked = {k: _check_field(k, v, sizes) for k, v in fields.items()}
+        g = frames.create_group(name)
+        g.attrs["increment"] = inc
+        g.attrs["history_rows"] = self.n_history
+        for k, v in (attrs or {}).items():
+            g.attrs[k] = v
+        if contacts is not None:
+            _write_contacts(g.create_group("contacts"), contacts)
+        for k, (arr, loc) in checked.items():
+            d = g.create_dataset(k, data=arr)
+            d.attrs["location"] = loc
+            if k in STANDARD_FIELDS:
+                d.attrs["units"] = STANDARD_FIELDS[k][2]
+        self.flush()
+
+    def truncate(self, increment):
+        """Drop the frames after ``increment`` and the history rows written after that frame.
+
+        Used on restart from frame ``increment`` so that the continued run does not duplicate
+        rows.
+        """
+        frames = self._f["frames"]
+        name = _frame_name(increment)
+        if name not in frames:
+            raise ResultsError(f"truncate: no frame {increment} in {self.path} "
+                               f"(frames: {self.frame_ids})")
+        keep = int(frames[name].attrs["history_rows"])
+        for k in list(frames):
+            if int(k) > int(increment):
+                del frames[k]
+        h = self._f["history"]
+        for k in _columns(h):
+            h[k].resize((keep,))
+        self.flush()
+
+    def flush(self):
+        """Write everything to disk."""
+        self._f.flush()
+
+    def close(self):
+        if self._f.id.valid:
+            self._f.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def model_arrays(model):
+    """The ``/model`` arrays of a Model as a dict, and the block group names.
+
+    Returns
+    -------
+    arrays : dict of str -> ndarray
+        :data:`MODEL_ARRAYS` plus ``block_group`` (n_blocks,) int64 indexing ``names``.
+    names : list of str
+        block group names in order of first use.
+    """
+    arrays = {k: np.asarray(getattr(model, k), dtype=t) for k, t in MODEL_ARRAYS.items()}
+    names = list(dict.fromkeys(model.block_group))
+    arrays["block_group"] = np.array([names.index(g) for g in model.block_group], dtype=np.int64)
+    return arrays, names
+
+
+def _columns(history_group):
+    """History column names in the order of the first row ([] before the first row)."""
+    return json.loads(history_group.attrs.get("columns", "[]"))
+
+
+def _model_sizes(model):
+    nc = 0 if model.contacts is None else int(np.asarray(model.contacts.slave).shape[0])
+    return {"node": int(model.n_nodes), "element": int(model.n_elements), "contact": nc}
+
+
+def _write_contacts(g, contacts):
+    for name, dtype in CONTACT_ARRAYS.items():
+        if hasattr(contacts, name):
+            g.create_dataset(name, data=np.asarray(getattr(contacts, name), dtype=dtype))
+
+
+def _check_field(name, value, sizes):
+    """Validate a frame field; returns (array, location)."""
+    arr = np.asarray(value)
+    if arr.ndim == 0:
+        raise ResultsError(f"write_frame: field {name!r} is a scalar; store scalars in attrs")
+    if name in STANDARD_FIELDS:
+        loc, trail, _, _ = STANDARD_FIELDS[name]
+        want = (sizes[loc],) + trail
+        if arr.shape != want:
+            raise ResultsError(f"write_frame: field {name!r} must have shape {want} "
+                               f"(n_{loc}s = {sizes[loc]}), got {arr.shape}")
+        return arr.astype(np.float64, copy=False), loc
+    for loc in ("node", "element", "contact"):
+        if arr.shape[0] == sizes[loc]:
+            return arr, loc
+    raise ResultsError(f"write_frame: field {name!r} has leading dimension {arr.shape[0]}, not "
+                       f"n_nodes={sizes['node']}, n_elements={sizes['element']} or "
+                       f"n_contacts={sizes['contact']}")
+
+
+# ---------------------------------------------------------------------- reading
+def check_file(path):
+    """Raise :class:`ResultsError` unless ``path`` is a dr_masonry results file of this schema."""
+    path = os.fspath(path)
+    if not os.path.isfile(path):
+        raise ResultsError(f"results file {path!r} does not exist")
+    try:
+        with h5py.File(path, "r") as f:
+            fmt = f.attrs.get("format")
+            ver = f["config"].attrs.get("schema_version") if "config" in f else None
+    except OSError as e:
+        raise ResultsError(f"results file {path!r} cannot be opened as HDF5: {e}") from None
+    if fmt != FORMAT_NAME or ver is None:
+        raise ResultsError(f"{path!r} is not a dr_masonry results file (format attribute {fmt!r})")
+    if int(ver) != SCHEMA_VERSION:
+        raise ResultsError(f"{path!r} has schema version {int(ver)}, this code reads version "
+                           f"{SCHEMA_VERSION}")
+
+
+class Result:
+    """A results file opened for reading (see :func:`open_result`).
+
+    Attributes
+    ----------
+    path : str
+    model_arrays : dict of str -> ndarray
+        the ``/model`` datasets (and ``contacts`` -> dict of contact arrays, or None).
+    group_names : list of str
+        block group names; ``model_arrays["block_group"]`` indexes them.
+    materials, joint_laws : list of dict
+        descriptions of the block materials and joint laws.
+    config : dict
+        the input configuration of the run.
+    attrs : dict
+        ``code_version``, ``schema_version``, ``created``, ``restarts``.
+    history : dict of str -> (n_rows,) float64
+    frame_ids : list of int
+        the increments of the frames, ascending.
+    """
+
+    def __init__(self, path):
+        check_file(path)
+        self.path = os.fspath(path)
+        with h5py.File(self.path, "r") as f:
+            m = f["model"]
+            self.model_arrays = {k: m[k][()] for k in m if isinstance(m[k], h5py.Dataset)}
+            self.model_arrays["contacts"] = (
+                {k: v[()] for k, v in m["contacts"].items()} if "contacts" in m else None)
+            self.group_names = json.loads(m.attrs["group_names"])
+            self.materials = json.loads(m.attrs["materials"])
+            self.joint_laws = json.loads(m.attrs["joint_laws"])
+            self.sizes = json.loads(m.attrs["sizes"])
+            c = f["config"]
+            self.config = json.loads(c.attrs["json"])
+            self.attrs = {"code_version": str(c.attrs["code_version"]),
+                          "schema_version": int(c.attrs["schema_version"]),
+                          "created": str(f.attrs.get("created", "")),
+                          "restarts": json.loads(c.attrs.get("restarts", "[]"))}
+            h = f["history"]
+            self.history = {k: h[k][()] for k in _columns(h)}
+            self.frame_ids = sorted(int(k) for k in f["frames"])
+
+    @property
+    def n_frames(self):
+        return len(self.frame_ids)
+
+    @property
+    def n_history(self):
+        return len(next(iter(self.history.values()))) if self.history else 0
+
+    @property
+    def groups(self):
+        """Block group name -> block ids."""
+        bg = self.model_arrays["block_group"]
+        return {n: np.flatnonzero(bg == i) for i, n in enumerate(self.group_names)}
+
+    def _frame_group(self, f, i):
+        try:
+            inc = self.frame_ids[i]
+        except (IndexError, TypeError):
+            raise ResultsError(f"frame index {i!r} out of range: {self.path} has "
+                               f"{self.n_frames} frames") from None
+        return f["frames"][_frame_name(inc)]
+
+    def frame(self, i):
+        """Fields of frame ``i`` (position in :attr:`frame_ids`, negative counts from the end)."""
+        with h5py.File(self.path, "r") as f:
+            g = self._frame_group(f, i)
+            return {k: v[()] for k, v in g.items() if isinstance(v, h5py.Dataset)}
+
+    def locations(self, i):
+        """Location ("node", "element" or "contact") of each field of frame ``i``."""
+        with h5py.File(self.path, "r") as f:
+            g = self._frame_group(f, i)
+            return {k: str(v.attrs["location"]) for k, v in g.items()
+                    if isinstance(v, h5py.Dataset)}
+
+    def frame_attrs(self, i):
+        """Attributes of frame ``i`` (``increment``, ``history_rows``, ``time``, ...)."""
+        with h5py.File(self.path, "r") as f:
+            return {k: (v.item() if hasattr(v, "item") else v)
+                    for k, v in self._frame_group(f, i).attrs.items()}
+
+    def contacts(self, i=None):
+        """Contact arrays valid at frame ``i`` (the frame's own set if it has one), or None."""
+        if i is not None:
+            with h5py.File(self.path, "r") as f:
+                g = self._frame_group(f, i)
+                if "contacts" in g:
+                    return {k: v[()] for k, v in g["contacts"].items()}
+        return self.model_arrays["contacts"]
+
+    def summary(self):
+        """One-line description of the model size."""
+        c = self.model_arrays["contacts"]
+        nc = 0 if c is None else len(c["slave"])
+        nb = len(self.model_arrays["block_divisions"])
+        return (f"{nb} blocks, {self.sizes['element']} hexahedra, {self.sizes['node']} nodes, "
+                f"{nc} contact points")
+
+
+def open_result(path):
+    """Open a results file for reading; raises :class:`ResultsError` if it is missing or foreign."""
+    return Result(path)

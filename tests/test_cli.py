@@ -1,0 +1,124 @@
+"""Command line and the shared key=value parser of the case scripts."""
+import os
+import subprocess
+import sys
+import types
+
+import pytest
+
+from dr_masonry import cli
+from dr_masonry.cli import main
+from dr_masonry.params import ParameterError, parse_overrides
+from test_results import write_fake_result
+
+PARAMS = {"n": 4, "drift": 0.01, "name": "wall", "cyclic": False, "mesh": (4, 1, 2),
+          "amps": [0.1, 0.2], "extra": None, "opts": {"a": 1}}
+
+
+def test_parse_overrides_types():
+    got = parse_overrides(PARAMS, ["n=1e3", "drift=2.5e-2", "name=squat", "cyclic=yes",
+                                   "mesh=2,1,1", "amps=[0.5, 1, 2]", "extra=(1, 2)",
+                                   'opts={"b": 2}'])
+    assert got == {"n": 1000, "drift": 0.025, "name": "squat", "cyclic": True,
+                   "mesh": (2, 1, 1), "amps": [0.5, 1.0, 2.0], "extra": (1, 2),
+                   "opts": {"b": 2}}
+    assert type(got["n"]) is int and type(got["amps"][1]) is float
+    assert PARAMS["n"] == 4                      # defaults untouched
+    assert parse_overrides(PARAMS, []) == PARAMS
+    assert parse_overrides(PARAMS, ["cyclic=OFF", "extra=free text"])["extra"] == "free text"
+
+
+@pytest.mark.parametrize("arg, msg", [
+    ("nx=3", r"unknown parameter 'nx'; valid keys: n, drift, name, cyclic, mesh, amps"),
+    ("n", r"argument 'n' is not key=value"),
+    ("n=2.5", r"parameter n='2.5': cannot convert to int"),
+    ("drift=big", r"parameter drift='big': cannot convert to float"),
+    ("cyclic=maybe", r"parameter cyclic='maybe': cannot convert to bool"),
+    ("mesh=2,x", r"parameter mesh='x'"),
+    ("opts=[1]", r"cannot convert to dict"),
+])
+def test_parse_overrides_errors(arg, msg):
+    with pytest.raises(ParameterError, match=msg):
+        parse_overrides(PARAMS, [arg])
+
+
+def test_parse_overrides_help(capsys):
+    with pytest.raises(SystemExit) as e:
+        parse_overrides(PARAMS, ["n=2", "--help"], doc="S9 test scene.\n\nMore text.")
+    assert e.value.code == 0
+    out = capsys.readouterr().out
+    assert out.startswith("S9 test scene.") and "drift  = 0.01" in out and "mesh   = (4, 1, 2)" in out
+
+
+@pytest.fixture()
+def fake_case(monkeypatch):
+    """A case module dr_masonry.cases.fakecase following the case pattern."""
+    mod = types.ModuleType("dr_masonry.cases.fakecase")
+    mod.__doc__ = "Fake case: records its parameters.\n\nDetails."
+    mod.PARAMS = {"n": 2, "drift": 0.01}
+    mod.calls = []
+
+    def _main(argv=None):
+        p = parse_overrides(mod.PARAMS, argv, mod.__doc__)
+        mod.calls.append(p)
+        return 0
+
+    mod.main = _main
+    monkeypatch.setitem(sys.modules, "dr_masonry.cases.fakecase", mod)
+    monkeypatch.setattr(cli, "available_cases", lambda: ["fakecase"])
+    return mod
+
+
+def test_run_case(fake_case, capsys):
+    assert main(["run", "fakecase", "n=5", "drift=0.02"]) == 0
+    assert fake_case.calls == [{"n": 5, "drift": 0.02}]
+    assert main(["run", "fakecase", "m=1"]) == 2
+    assert "unknown parameter 'm'; valid keys: n, drift" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as e:
+        main(["run", "fakecase", "--help"])
+    assert e.value.code == 0 and "Fake case" in capsys.readouterr().out
+
+
+def test_run_unknown_case_and_list(fake_case, capsys):
+    assert main(["run", "nosuchcase"]) == 2
+    assert "unknown case 'nosuchcase'; available: fakecase" in capsys.readouterr().err
+    assert main(["list"]) == 0
+    assert capsys.readouterr().out.split() == ["fakecase", "Fake", "case:", "records", "its",
+                                               "parameters."]
+
+
+def test_info(tmp_path, capsys):
+    p = tmp_path / "r.h5"
+    write_fake_result(p)
+    assert main(["info", str(p), "--peak", "force"]) == 0
+    out = capsys.readouterr().out
+    assert "2 blocks, 4 hexahedra, 24 nodes, 6 contact points" in out
+    assert "history:   5 rows, columns ['increment', 'disp', 'force']" in out
+    assert "frames:    3 (increments 0 .. 4)" in out
+    assert "last row:  increment=4, disp=0.0004, force=-756.802" in out
+    # 1e3 sin(i), i = 0..4: max at i = 2, min at i = 4
+    assert "peak force: max 909.297 (row 2), min -756.802 (row 4)" in out
+    assert '"drift": 0.01' in out
+    assert main(["info", str(p), "--peak", "drift"]) == 2
+    assert "no history column ['drift']" in capsys.readouterr().err
+    assert main(["info", str(tmp_path / "none.h5")]) == 2
+    assert "does not exist" in capsys.readouterr().err
+
+
+def test_vtk_command(tmp_path, capsys):
+    p = tmp_path / "r.h5"
+    write_fake_result(p)
+    assert main(["vtk", str(p), str(tmp_path / "vtk")]) == 0
+    assert capsys.readouterr().out.strip() == str(tmp_path / "vtk" / "blocks.pvd")
+    assert os.path.isfile(tmp_path / "vtk" / "contacts_000004.vtu")
+
+
+def test_python_m_info(tmp_path):
+    p = tmp_path / "r.h5"
+    write_fake_result(p)
+    env = dict(os.environ)
+    env.pop("OMP_WAIT_POLICY", None)
+    proc = subprocess.run([sys.executable, "-m", "dr_masonry", "info", str(p)],
+                          capture_output=True, text=True, env=env, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert "24 nodes" in proc.stdout and "frames:    3" in proc.stdout

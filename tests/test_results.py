@@ -1,0 +1,241 @@
+"""HDF5 results file: schema round trip, validation, crash safety, restart."""
+import dataclasses
+import json
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+from types import SimpleNamespace
+
+import h5py
+import numpy as np
+import pytest
+
+from dr_masonry.model import Model
+from dr_masonry.results import (SCHEMA_VERSION, ResultsError, ResultWriter, open_result)
+
+
+@dataclasses.dataclass
+class StubMaterial:
+    """Stand-in for PlasticDamage: a dataclass with params_array()."""
+    E: float = 10e9
+    nu: float = 0.2
+
+    def params_array(self):
+        return np.array([self.E, self.nu])
+
+
+class StubLaw:
+    """A joint law that is not a dataclass (stored as repr)."""
+
+    def __repr__(self):
+        return "StubLaw(kn=1e12)"
+
+
+def tiny_model(with_contacts=True):
+    """Two stacked boxes 0.2 x 0.1 x 0.1 m (block 1 on top of block 0), 2 x 1 x 1 hexahedra each.
+
+    The contact set (when asked) has one point per top-face node of block 0 against the bottom
+    face of block 1.
+    """
+    m = Model()
+    mat = StubMaterial()
+    m.set_joint_law(StubLaw())
+    m.add_box((0, 0, 0), (0.2, 0.1, 0.1), mat, divisions=(2, 1, 1), group="wall", fixed=True)
+    m.add_box((0, 0, 0.1), (0.2, 0.1, 0.1), mat, divisions=(2, 1, 1), group="beam")
+    if with_contacts:
+        grid, _ = m.block_face(0, 1)
+        _, quads = m.block_face(1, 0)
+        slave = grid.ravel()
+        nc = slave.size
+        m.contacts = SimpleNamespace(
+            slave=slave, master=np.repeat(quads[:1], nc, axis=0), xi=np.zeros((nc, 2)),
+            area=np.full(nc, 0.02 / nc), law=np.zeros(nc, np.int64),
+            blocks=np.tile([0, 1], (nc, 1)), gap0=np.zeros((nc, 3)), n=nc)
+    return m
+
+
+def fake_fields(m, k):
+    """Frame fields of increment k: U = k * 1e-4 * node index pattern, damage growing with k."""
+    nn, ne, nc = m.n_nodes, m.n_elements, m.contacts.n
+    U = np.zeros((nn, 3))
+    U[:, 0] = 1e-4 * k * m.nodes[:, 2] / 0.2
+    return {"U": U, "dt": np.linspace(0, 0.1 * k, ne), "dc": np.zeros(ne),
+            "D": np.linspace(0, 0.2 * k, nc), "opening": np.full(nc, 1e-5 * k),
+            "slip": np.full(nc, 2e-5 * k)}
+
+
+def write_fake_result(path, n_rows=5, frames=(0, 2, 4)):
+    """A results file of the tiny model: history rows disp = 1e-4 i m, force = 1e3 * sin(i) N."""
+    m = tiny_model()
+    cfg = {"case": "tiny", "params": {"drift": 0.01, "mesh": [2, 1, 1]}}
+    with ResultWriter(path, m, cfg) as w:
+        for i in range(n_rows):
+            w.append_history({"increment": i, "disp": 1e-4 * i, "force": 1e3 * np.sin(i)})
+            if i in frames:
+                w.write_frame(i, fake_fields(m, i), attrs={"control": 1e-4 * i})
+    return m, cfg
+
+
+def test_round_trip(tmp_path):
+    p = tmp_path / "r.h5"
+    m, cfg = write_fake_result(p)
+    r = open_result(p)
+    a = r.model_arrays
+    for name in ("nodes", "elements", "element_block", "block_node_start", "block_element_start",
+                 "block_divisions", "block_corners", "block_material", "block_fixed",
+                 "block_joint"):
+        np.testing.assert_array_equal(a[name], getattr(m, name), err_msg=name)
+    assert r.group_names == ["wall", "beam"]
+    np.testing.assert_array_equal(a["block_group"], [0, 1])
+    assert {k: v.tolist() for k, v in r.groups.items()} == {"wall": [0], "beam": [1]}
+    assert r.materials == [{"type": "StubMaterial", "params": {"E": 10e9, "nu": 0.2}}]
+    assert r.joint_laws == [{"type": "StubLaw", "repr": "StubLaw(kn=1e12)"}]
+    np.testing.assert_array_equal(a["contacts"]["slave"], m.contacts.slave)
+    np.testing.assert_array_equal(a["contacts"]["master"], m.contacts.master)
+    assert r.config == cfg
+    assert r.attrs["schema_version"] == SCHEMA_VERSION
+    np.testing.assert_array_equal(r.history["disp"], 1e-4 * np.arange(5))
+    np.testing.assert_array_equal(r.history["force"], 1e3 * np.sin(np.arange(5)))
+    assert list(r.history) == ["increment", "disp", "force"]
+    assert r.frame_ids == [0, 2, 4] and r.n_frames == 3 and r.n_history == 5
+    fr = r.frame(1)
+    exp = fake_fields(m, 2)
+    assert set(fr) == set(exp)
+    for k in exp:
+        np.testing.assert_array_equal(fr[k], exp[k], err_msg=k)
+    np.testing.assert_array_equal(r.frame(-1)["dt"], fake_fields(m, 4)["dt"])
+    at = r.frame_attrs(2)
+    assert at["increment"] == 4 and at["control"] == pytest.approx(4e-4) and at["history_rows"] == 5
+    with h5py.File(p, "r") as f:
+        assert f["frames/000002/U"].attrs["units"] == "m"
+        assert f["frames/000002/U"].attrs["location"] == "node"
+        assert f["history/disp"].maxshape == (None,)
+    with pytest.raises(ResultsError, match="out of range"):
+        r.frame(3)
+
+
+def test_history_keys_must_match(tmp_path):
+    with ResultWriter(tmp_path / "r.h5", tiny_model(), {}) as w:
+        w.append_history({"a": 1.0, "b": 2.0})
+        with pytest.raises(ResultsError, match=r"missing \['b'\], unknown \['c'\]"):
+            w.append_history({"a": 1.0, "c": 2.0})
+        with pytest.raises(ResultsError, match="'b' value 'x' is not a number"):
+            w.append_history({"a": 1.0, "b": "x"})
+        w.append_history({"b": 4.0, "a": 3.0})
+        assert w.n_history == 2
+    h = open_result(tmp_path / "r.h5").history
+    np.testing.assert_array_equal(h["a"], [1.0, 3.0])
+    np.testing.assert_array_equal(h["b"], [2.0, 4.0])
+
+
+def test_field_validation(tmp_path):
+    m = tiny_model()
+    with ResultWriter(tmp_path / "r.h5", m, {}) as w:
+        with pytest.raises(ResultsError, match=r"'U' must have shape \(24, 3\)"):
+            w.write_frame(0, {"U": np.zeros((24, 2))})
+        with pytest.raises(ResultsError, match=r"'D' must have shape \(6,\)"):
+            w.write_frame(0, {"D": np.zeros(5)})
+        with pytest.raises(ResultsError, match="leading dimension 7"):
+            w.write_frame(0, {"foo": np.zeros((7, 2))})
+        with pytest.raises(ResultsError, match="increment must be >= 0"):
+            w.write_frame(-1, {})
+        gp = np.arange(m.n_elements * 8 * 3, dtype=float).reshape(m.n_elements, 8, 3)
+        w.write_frame(0, {"gp_state": gp, "V": np.ones((m.n_nodes, 3))})
+        with pytest.raises(ResultsError, match="frame 0 already exists"):
+            w.write_frame(0, {})
+    r = open_result(tmp_path / "r.h5")
+    np.testing.assert_array_equal(r.frame(0)["gp_state"], gp)
+    with h5py.File(tmp_path / "r.h5", "r") as f:
+        assert f["frames/000000/gp_state"].attrs["location"] == "element"
+
+
+def test_frame_contact_set(tmp_path):
+    """A frame may carry its own (re-detected) contact set; contact fields follow its size."""
+    m = tiny_model()
+    new = SimpleNamespace(**{k: getattr(m.contacts, k)[:3] for k in
+                             ("slave", "master", "xi", "area", "law", "blocks", "gap0")})
+    with ResultWriter(tmp_path / "r.h5", m, {}) as w:
+        w.write_frame(0, {"D": np.zeros(6)})
+        w.write_frame(1, {"D": np.ones(3)}, contacts=new)
+    r = open_result(tmp_path / "r.h5")
+    assert len(r.contacts(0)["slave"]) == 6
+    np.testing.assert_array_equal(r.contacts(1)["slave"], m.contacts.slave[:3])
+
+
+def test_no_contacts(tmp_path):
+    m = tiny_model(with_contacts=False)
+    with ResultWriter(tmp_path / "r.h5", m, {"x": 1}) as w:
+        w.write_frame(0, {"U": np.zeros((m.n_nodes, 3))})
+    r = open_result(tmp_path / "r.h5")
+    assert r.model_arrays["contacts"] is None and r.contacts(0) is None
+    assert r.summary() == "2 blocks, 4 hexahedra, 24 nodes, 0 contact points"
+
+
+def test_open_errors(tmp_path):
+    with pytest.raises(ResultsError, match="does not exist"):
+        open_result(tmp_path / "missing.h5")
+    (tmp_path / "junk.h5").write_text("not hdf5")
+    with pytest.raises(ResultsError, match="cannot be opened as HDF5"):
+        open_result(tmp_path / "junk.h5")
+    with h5py.File(tmp_path / "other.h5", "w") as f:
+        f["x"] = 1
+    with pytest.raises(ResultsError, match="not a dr_masonry results file"):
+        open_result(tmp_path / "other.h5")
+    write_fake_result(tmp_path / "r.h5")
+    with h5py.File(tmp_path / "r.h5", "a") as f:
+        f["config"].attrs["schema_version"] = SCHEMA_VERSION + 1
+    with pytest.raises(ResultsError, match=f"schema version {SCHEMA_VERSION + 1}"):
+        open_result(tmp_path / "r.h5")
+    with pytest.raises(ResultsError, match="mode must be"):
+        ResultWriter(tmp_path / "x.h5", tiny_model(), {}, mode="r")
+
+
+def test_append_restart(tmp_path):
+    p = tmp_path / "r.h5"
+    m, _ = write_fake_result(p)
+    with ResultWriter(p, m, {"restart": True}, mode="a") as w:
+        w.truncate(2)      # restart from frame 2 (written after row 2): drop frame 4, rows 3, 4
+        assert w.frame_ids == [0, 2] and w.n_history == 3
+        w.append_history({"increment": 3, "disp": 7.0, "force": 8.0})
+        w.write_frame(3, fake_fields(m, 3))
+    r = open_result(p)
+    np.testing.assert_array_equal(r.history["disp"], [0.0, 1e-4, 2e-4, 7.0])
+    assert r.frame_ids == [0, 2, 3]
+    assert r.attrs["restarts"][0]["config"] == {"restart": True}
+    other = Model()
+    other.add_box((0, 0, 0), (1, 1, 1), StubMaterial())
+    with pytest.raises(ResultsError, match="do not match"):
+        ResultWriter(p, other, {}, mode="a")
+    with pytest.raises(ResultsError, match="does not exist"):
+        ResultWriter(tmp_path / "none.h5", None, {}, mode="a")
+
+
+def test_killed_writer_leaves_readable_file(tmp_path):
+    """A child writes 3 rows + 2 frames, flushes, then SIGKILLs itself: everything is readable."""
+    p = tmp_path / "killed.h5"
+    code = textwrap.dedent(f"""
+        import os, signal, sys
+        sys.path.insert(0, {os.path.dirname(__file__)!r})
+        import numpy as np
+        from test_results import tiny_model, fake_fields
+        from dr_masonry.results import ResultWriter
+        m = tiny_model()
+        w = ResultWriter({str(p)!r}, m, {{"case": "killed"}})
+        for i in range(3):
+            w.append_history({{"i": i, "f": 10.0 * i}})
+            if i < 2:
+                w.write_frame(i, fake_fields(m, i + 1))
+        os.kill(os.getpid(), signal.SIGKILL)
+    """)
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert proc.returncode == -signal.SIGKILL, proc.stderr
+    r = open_result(p)
+    np.testing.assert_array_equal(r.history["f"], [0.0, 10.0, 20.0])
+    assert r.frame_ids == [0, 1] and r.config == {"case": "killed"}
+    np.testing.assert_array_equal(r.frame(1)["U"], fake_fields(tiny_model(), 2)["U"])
+    with ResultWriter(p, None, {}, mode="a") as w:   # and a restart can continue it
+        w.append_history({"i": 3, "f": 30.0})
+    assert open_result(p).n_history == 4
+    json.loads(h5py.File(p, "r")["config"].attrs["json"])

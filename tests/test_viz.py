@@ -1,0 +1,167 @@
+"""VTK time series, renders and plots, read back and checked against the written data."""
+import os
+import xml.etree.ElementTree as ET
+
+import numpy as np
+import pytest
+import vtk
+from matplotlib.image import imread
+from vtk.util.numpy_support import vtk_to_numpy
+
+from dr_masonry.results import ResultWriter, open_result
+from dr_masonry.viz import plots, render
+from dr_masonry.viz.render import RenderError, exterior_faces, render_model
+from dr_masonry.viz.vtk_series import block_corner_nodes, export_vtk
+from test_results import fake_fields, tiny_model, write_fake_result
+
+
+@pytest.fixture()
+def h5(tmp_path):
+    p = tmp_path / "run.h5"
+    write_fake_result(p)
+    return p
+
+
+def read_vtu(path):
+    r = vtk.vtkXMLUnstructuredGridReader()
+    r.SetFileName(str(path))
+    r.Update()
+    return r.GetOutput()
+
+
+def arrays_of(data):
+    return {data.GetArrayName(i): vtk_to_numpy(data.GetArray(i)) for i in range(data.GetNumberOfArrays())}
+
+
+def test_export_vtk_round_trip(h5):
+    m = tiny_model()
+    pvd = export_vtk(h5)
+    out = os.path.dirname(pvd)
+    assert out == str(h5)[:-3] + "_vtk"
+    for coll, n in (("blocks.pvd", 3), ("contacts.pvd", 3)):
+        ds = ET.parse(os.path.join(out, coll)).getroot().find("Collection").findall("DataSet")
+        assert len(ds) == n
+        # the "control" attribute increases strictly, so it is the time
+        np.testing.assert_allclose([float(d.get("timestep")) for d in ds], [0.0, 2e-4, 4e-4])
+        assert all(os.path.isfile(os.path.join(out, d.get("file"))) for d in ds)
+    for inc in (0, 2, 4):
+        f = fake_fields(m, inc)
+        g = read_vtu(os.path.join(out, f"blocks_{inc:06d}.vtu"))
+        assert g.GetNumberOfCells() == m.n_elements
+        assert all(g.GetCellType(i) == vtk.VTK_HEXAHEDRON for i in range(g.GetNumberOfCells()))
+        conn = vtk_to_numpy(g.GetCells().GetConnectivityArray()).reshape(-1, 8)
+        np.testing.assert_array_equal(conn, m.elements)
+        np.testing.assert_allclose(vtk_to_numpy(g.GetPoints().GetData()), m.nodes + f["U"])
+        pd, cd = arrays_of(g.GetPointData()), arrays_of(g.GetCellData())
+        np.testing.assert_array_equal(pd["U"], f["U"])
+        np.testing.assert_array_equal(cd["dt"], f["dt"])
+        np.testing.assert_array_equal(cd["dc"], f["dc"])
+        np.testing.assert_array_equal(cd["block_id"], [0, 0, 1, 1])
+        c = read_vtu(os.path.join(out, f"contacts_{inc:06d}.vtu"))
+        assert c.GetNumberOfCells() == m.contacts.n
+        assert all(c.GetCellType(i) == vtk.VTK_VERTEX for i in range(c.GetNumberOfCells()))
+        np.testing.assert_allclose(vtk_to_numpy(c.GetPoints().GetData()),
+                                   (m.nodes + f["U"])[m.contacts.slave])
+        cp = arrays_of(c.GetPointData())
+        for k in ("D", "opening", "slip"):
+            np.testing.assert_array_equal(cp[k], f[k])
+        np.testing.assert_array_equal(cp["master_block"], np.ones(m.contacts.n))
+
+
+def test_export_reference_configuration_and_increment_times(tmp_path):
+    m = tiny_model(with_contacts=False)
+    p = tmp_path / "r.h5"
+    with ResultWriter(p, m, {}) as w:
+        for inc, ctrl in ((3, 1.0), (7, -1.0)):            # cyclic control: not monotonic
+            w.write_frame(inc, {"U": np.ones((m.n_nodes, 3))}, attrs={"control": ctrl})
+    pvd = export_vtk(p, tmp_path / "out", warp=0.0)
+    ds = ET.parse(pvd).getroot().find("Collection").findall("DataSet")
+    assert [float(d.get("timestep")) for d in ds] == [3.0, 7.0]
+    assert not os.path.exists(tmp_path / "out" / "contacts.pvd")
+    g = read_vtu(tmp_path / "out" / "blocks_000007.vtu")
+    np.testing.assert_array_equal(vtk_to_numpy(g.GetPoints().GetData()), m.nodes)
+
+
+def test_block_corner_nodes_match_corner_coordinates():
+    m = tiny_model()
+    m.add_box((1, 0, 0), (0.3, 0.2, 0.1), m.materials[0], divisions=(3, 2, 4))
+    c = block_corner_nodes({"block_divisions": m.block_divisions,
+                            "block_node_start": m.block_node_start})
+    for b in range(m.n_blocks):
+        np.testing.assert_allclose(m.nodes[c[b]], m.block_corners[b], atol=1e-12)
+
+
+def test_exterior_faces_closed_and_outward():
+    m = tiny_model()
+    elem, quads = exterior_faces(m.elements)
+    assert len(quads) == 20   # per block: 2 hexahedra x 6 faces - 2 internal
+    x = m.nodes
+    nrm = np.cross(x[quads[:, 1]] - x[quads[:, 0]], x[quads[:, 3]] - x[quads[:, 0]])
+    out = x[quads].mean(axis=1) - x[m.elements[elem]].mean(axis=1)
+    assert np.all(np.einsum("ij,ij->i", nrm, out) > 0)
+    area = 0.5 * np.linalg.norm(nrm, axis=1) * 2  # rectangles
+    assert area.sum() == pytest.approx(2 * 2 * (0.2 * 0.1 + 0.2 * 0.1 + 0.1 * 0.1))
+
+
+def assert_picture(png, min_colours=5, min_ink=0.05):
+    """A PNG exists, is not blank (a fraction ``min_ink`` of non-white pixels), has colours."""
+    img = imread(png)[..., :3]
+    assert img.shape[0] > 100 and img.shape[1] > 100
+    inked = np.any(img < 0.95, axis=2).mean()
+    assert inked > min_ink, f"{png}: only {inked:.1%} of the pixels are not white"
+    assert len(np.unique(img.reshape(-1, 3), axis=0)) >= min_colours
+
+
+BACKENDS = ["matplotlib"] + (["vtk"] if render.vtk_offscreen_available() else [])
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("field", [None, "dt", "U", "D"])
+def test_render_png(h5, tmp_path, backend, field):
+    png = tmp_path / f"{backend}_{field}.png"
+    out = render_model(h5, png, field=field, warp=100.0, backend=backend, size=(400, 300))
+    assert out.backend == backend and out.path == str(png)
+    assert_picture(png)
+
+
+def test_render_model_object_and_backend_choice(tmp_path, monkeypatch):
+    monkeypatch.setenv("DR_MASONRY_RENDER", "matplotlib")
+    out = render_model(tiny_model(), tmp_path / "m.png", view="front", size=(300, 300))
+    assert out.backend == "matplotlib"
+    assert_picture(out.path)
+    img = imread(out.path)[..., :3].reshape(-1, 3)
+    # the two groups are drawn with the first two group colours
+    for colour in render._GROUP_COLOURS[:2]:
+        assert np.any(np.all(np.abs(img - colour) < 0.02, axis=1))
+    monkeypatch.setenv("DR_MASONRY_RENDER", "opengl")
+    with pytest.raises(RenderError, match="'opengl'"):
+        render.choose_backend()
+
+
+def test_render_errors(h5, tmp_path):
+    with pytest.raises(RenderError, match="a Model has no fields"):
+        render_model(tiny_model(), tmp_path / "x.png", field="dt", backend="matplotlib")
+    with pytest.raises(RenderError, match="no field 'sigma'"):
+        render_model(h5, tmp_path / "x.png", field="sigma", backend="matplotlib")
+    with pytest.raises(RenderError, match="view must be one of"):
+        render_model(h5, tmp_path / "x.png", view="diagonal")
+
+
+def test_plot_history_overlay(h5, tmp_path):
+    other = tmp_path / "other.h5"
+    write_fake_result(other, n_rows=3)
+    png = plots.plot_history([h5, open_result(other)], "disp", "force", tmp_path / "h.png",
+                             label=["a", "b"])
+    assert_picture(png, min_colours=3, min_ink=0.02)
+    with pytest.raises(plots.PlotError, match="no history column 'drift'"):
+        plots.plot_history(h5, "drift", "force", tmp_path / "x.png")
+    with pytest.raises(plots.PlotError, match="2 labels for 1 runs"):
+        plots.plot_history(h5, "disp", "force", tmp_path / "x.png", label=["a", "b"])
+
+
+def test_crack_map(h5, tmp_path):
+    assert_picture(plots.crack_map(h5, -1, tmp_path / "c.png", threshold=0.3))
+    assert_picture(plots.crack_map(h5, 0, tmp_path / "c2.png", blocks="wall", plane="yz"),
+                   min_colours=2, min_ink=0.02)
+    with pytest.raises(plots.PlotError, match="no block group 'roof'"):
+        plots.crack_map(h5, 0, tmp_path / "x.png", blocks="roof")

@@ -1,0 +1,159 @@
+"""Curves from the history of one or several runs, and 2-D crack maps of walls.
+
+Drawn on bare matplotlib ``Figure`` objects (no pyplot, so the caller's back end is untouched).
+"""
+from __future__ import annotations
+
+import os
+
+import numpy as np
+from matplotlib.collections import LineCollection, PolyCollection
+from matplotlib.figure import Figure
+
+from .render import HEX_EDGES
+from .vtk_series import as_result, block_corner_nodes, positions
+
+#: in-plane axes of an elevation: plane name -> (horizontal, vertical) coordinate indices
+PLANES = {"xz": (0, 2), "yz": (1, 2), "xy": (0, 1)}
+#: unit names of common scale factors from SI
+_UNITS = {"m": {1.0: "m", 1e3: "mm"}, "N": {1.0: "N", 1e-3: "kN", 1e-6: "MN"}}
+
+
+class PlotError(ValueError):
+    """Bad arguments to a plotting function."""
+
+
+def _unit(scale, kind):
+    return _UNITS[kind].get(float(scale), f"x{scale:g} SI")
+
+
+def plot_history(results, x_key, y_key, png, xscale=1e3, yscale=1e-3, label=None, xlabel=None,
+                 ylabel=None, title=None):
+    """Plot history column ``y_key`` against ``x_key`` for one run or overlay several.
+
+    Parameters
+    ----------
+    results : str, Result or list of them
+        the run(s).
+    x_key, y_key : str
+        history columns (SI).
+    png : str
+        output file.
+    xscale, yscale : float
+        factors applied to the SI values (default m -> mm and N -> kN).
+    label : str or list of str, optional
+        legend entries (default: the file names).
+    xlabel, ylabel, title : str, optional
+        default labels are the keys with the units of the scales.
+
+    Returns
+    -------
+    str
+        ``png``.
+    """
+    runs = [as_result(r) for r in (results if isinstance(results, (list, tuple)) else [results])]
+    labels = label if isinstance(label, (list, tuple)) else [label] * len(runs)
+    if len(labels) != len(runs):
+        raise PlotError(f"plot_history: {len(labels)} labels for {len(runs)} runs")
+    fig = Figure(figsize=(6.4, 4.8))
+    ax = fig.add_subplot()
+    for r, lab in zip(runs, labels):
+        for key in (x_key, y_key):
+            if key not in r.history:
+                raise PlotError(f"plot_history: {r.path} has no history column {key!r}; "
+                                f"columns are {list(r.history)}")
+        ax.plot(r.history[x_key] * xscale, r.history[y_key] * yscale, lw=1.2,
+                label=lab or os.path.basename(r.path))
+    ax.set_xlabel(xlabel or f"{x_key} [{_unit(xscale, 'm')}]")
+    ax.set_ylabel(ylabel or f"{y_key} [{_unit(yscale, 'N')}]")
+    if title:
+        ax.set_title(title)
+    ax.grid(True, lw=0.4, alpha=0.5)
+    ax.axhline(0.0, color="k", lw=0.5)
+    ax.axvline(0.0, color="k", lw=0.5)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(png, dpi=150)
+    return png
+
+
+def crack_map(result, frame, png, threshold=0.5, field="D", plane="xz", blocks=None, warp=0.0,
+              title=None):
+    """Elevation of a wall: block outlines, joint points with damage above ``threshold``, and
+    element tensile damage "dt" shaded.
+
+    Parameters
+    ----------
+    result : str or Result
+    frame : int
+        frame position (negative from the end).
+    png : str
+        output file.
+    threshold : float
+        contact points with ``field`` above it are drawn, coloured by its value.
+    field : str
+        contact field to map (default joint damage "D").
+    plane : {"xz", "yz", "xy"}
+        projection plane (x-z: a wall along x).
+    blocks : array_like of int or str, optional
+        block ids or a block group name to draw (default all).
+    warp : float
+        displacement magnification (0: reference positions).
+
+    Returns
+    -------
+    str
+        ``png``.
+    """
+    r = as_result(result)
+    if plane not in PLANES:
+        raise PlotError(f"crack_map: plane must be one of {sorted(PLANES)}, got {plane!r}")
+    a, b = PLANES[plane]
+    arrays = r.model_arrays
+    nb = len(arrays["block_divisions"])
+    if blocks is None:
+        sel = np.arange(nb)
+    elif isinstance(blocks, str):
+        if blocks not in r.groups:
+            raise PlotError(f"crack_map: no block group {blocks!r}; groups are {r.group_names}")
+        sel = r.groups[blocks]
+    else:
+        sel = np.asarray(blocks, dtype=np.int64)
+    keep = np.zeros(nb, bool)
+    keep[sel] = True
+    fields = r.frame(frame)
+    x = positions(arrays["nodes"], fields, warp)
+    fig = Figure(figsize=(8, 6))
+    ax = fig.add_subplot()
+    ax.set_aspect("equal")
+    dt = fields.get("dt")
+    if dt is not None:
+        elem = np.flatnonzero(keep[arrays["element_block"]] & (dt > 1e-3))
+        elem = elem[np.argsort(dt[elem])]          # most damaged drawn last
+        xe = x[arrays["elements"][elem]][:, :, [a, b]]
+        faces = xe[:, [0, 1, 5, 4]] if plane == "xz" else (
+            xe[:, [1, 2, 6, 5]] if plane == "yz" else xe[:, [0, 1, 2, 3]])
+        pc = PolyCollection(faces, array=dt[elem], cmap="Greys", clim=(0.0, 1.0),
+                            edgecolors="none")
+        ax.add_collection(pc)
+        fig.colorbar(pc, ax=ax, shrink=0.6, label="block tensile damage dt")
+    corners = block_corner_nodes(arrays)[keep]
+    seg = x[corners[:, HEX_EDGES]][:, :, :, [a, b]].reshape(-1, 2, 2)
+    ax.add_collection(LineCollection(seg, colors="0.3", linewidths=0.5))
+    con = r.contacts(frame)
+    if con is not None and field in fields:
+        v = fields[field]
+        on = (v > threshold) & keep[con["blocks"][:, 0]]
+        xs = x[con["slave"][on]]
+        order = np.argsort(v[on])
+        sc = ax.scatter(xs[order, a], xs[order, b], c=v[on][order], s=6, cmap="Reds",
+                        vmin=threshold, vmax=1.0 if field == "D" else None, zorder=3)
+        fig.colorbar(sc, ax=ax, shrink=0.6, label=f"joint {field} > {threshold:g}")
+    ax.autoscale_view()
+    ax.set_xlabel(f"{plane[0]} [m]")
+    ax.set_ylabel(f"{plane[1]} [m]")
+    inc = r.frame_ids[frame]
+    ax.set_title(title or f"{os.path.basename(r.path)}: increment {inc}")
+    fig.tight_layout()
+    fig.savefig(png, dpi=150)
+    return png
