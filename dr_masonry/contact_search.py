@@ -1,0 +1,596 @@
+"""Automatic node-to-face contact detection between the blocks of a :class:`~dr_masonry.model.Model`.
+
+Every pair of touching block faces (of different blocks, opposite normals, coplanar within
+``tol``, positive overlap area) gets ONE one-sided set of contact points: the nodes of the slave
+face against the element quads of the master face. A slave node gets one contact point per master
+block face its tributary region (the union of its quarter-quads: node, adjacent edge midpoints,
+quad centre) overlaps, with the clipped tributary area, so the areas of one slave face against
+one master face sum to their overlap area (to round-off).
+
+Choices (documented here once):
+
+* Slave side: the face with the finer mesh (smaller element-face area); on a tie (relative
+  difference below 1e-9) the face of the lower block id.
+* Joint law of a pair: the law named by one of its blocks (``block_joint >= 0``); if both blocks
+  name different laws, the law of the lower block id wins (independent of the slave/master
+  choice, hence of the meshes); else ``model.default_joint``. No law at all raises
+  :class:`ModelError` naming the two blocks.
+* Pairs of two fixed blocks get no contact points.
+* Master quads are stored with a canonical cyclic node order (normal out of the master block,
+  first edge closest to a reference tangent fixed by the normal, see :func:`_canonical_quads`),
+  so that coplanar master quads of different blocks share the local frame of
+  ``kernels/contact_frame.py`` and a slip vector keeps its meaning when a node slides across.
+* A slave node outside its master face (its tributary region only partly overlaps) is projected
+  on the nearest master quad with (r, s) clamped to [-1, 1]; ``gap0`` holds the offset.
+* Rows are sorted by slave node, then master block.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .kernels.contact_frame import local_gap
+from .model import BLOCK_FACES, HEX_NATURAL, ModelError
+
+#: default coplanarity / separation tolerance relative to the model size (bounding-box diagonal)
+REL_TOL = 1e-6
+#: default angle tolerance (rad) for two faces to count as opposite
+ANGLE_TOL = 1e-3
+#: clipped areas below this fraction of the slave element-face area are round-off (dropped)
+AREA_TOL = 1e-12
+#: slack on the natural coordinates before a slid slave node is re-assigned by :func:`redetect`
+SLIDE_SLACK = 1e-3
+
+
+@dataclass
+class ContactSet:
+    """Node-to-face contact points (layout of docs/internals.md).
+
+    Attributes
+    ----------
+    slave : (nc,) int64
+        slave node id.
+    master : (nc, 4) int64
+        node ids of the master element quad, normal pointing out of the master block.
+    xi : (nc, 2) float64
+        natural coordinates (r, s) in [-1, 1] of the slave node's projection on that quad.
+    area : (nc,) float64, m^2
+        tributary area of the contact point.
+    law : (nc,) int64
+        index into ``model.joint_laws``.
+    blocks : (nc, 2) int64
+        (slave block, master block).
+    gap0 : (nc, 3) float64, m
+        local gap [u, d1, d2] in the reference configuration (subtracted by the force kernel).
+    """
+    slave: np.ndarray
+    master: np.ndarray
+    xi: np.ndarray
+    area: np.ndarray
+    law: np.ndarray
+    blocks: np.ndarray
+    gap0: np.ndarray
+
+    def __post_init__(self):
+        for f in fields(self):
+            a = np.ascontiguousarray(getattr(self, f.name),
+                                     dtype=np.float64 if f.name in ("xi", "area", "gap0") else np.int64)
+            setattr(self, f.name, a)
+        n = self.slave.shape[0]
+        shapes = {"slave": (n,), "master": (n, 4), "xi": (n, 2), "area": (n,), "law": (n,),
+                  "blocks": (n, 2), "gap0": (n, 3)}
+        for name, shape in shapes.items():
+            if getattr(self, name).shape != shape:
+                raise ValueError(f"ContactSet.{name}: shape {getattr(self, name).shape}, "
+                                 f"expected {shape}")
+
+    @property
+    def n(self):
+        """Number of contact points."""
+        return self.slave.shape[0]
+
+    def subset(self, mask):
+        """The contact points selected by ``mask`` (bool (nc,) or an index array) as a new set."""
+        return ContactSet(**{f.name: getattr(self, f.name)[mask] for f in fields(self)})
+
+    @classmethod
+    def empty(cls):
+        """A set with no contact points."""
+        return cls(np.zeros(0), np.zeros((0, 4)), np.zeros((0, 2)), np.zeros(0), np.zeros(0),
+                   np.zeros((0, 2)), np.zeros((0, 3)))
+
+
+# ---------------------------------------------------------------------------- block faces
+def _face_tables():
+    """(6, 4) VTK corner ids of each block face in its grid order and (6, 2) its grid axes."""
+    corners = np.empty((6, 4), np.int64)
+    axes = np.empty((6, 2), np.int64)
+    for f, (axis, side) in enumerate(BLOCK_FACES):
+        u, v = (a for a in range(3) if a != axis)
+        axes[f] = (u, v)
+        for k, (su, sv) in enumerate(((-1, -1), (1, -1), (1, 1), (-1, 1))):
+            nat = np.zeros(3)
+            nat[[axis, u, v]] = side, su, sv
+            corners[f, k] = np.flatnonzero((HEX_NATURAL == nat).all(axis=1))[0]
+    return corners, axes
+
+
+FACE_CORNERS, FACE_AXES = _face_tables()
+
+
+def _faces(model, x):
+    """Geometry of all 6 * n_blocks block faces (face id = 6 * block + f) at coordinates ``x``.
+
+    Returns a dict of arrays: ``nodes`` (nf, 4) corner node ids in grid order, ``X`` (nf, 4, 3)
+    their coordinates (m), ``centre`` (nf, 3), ``normal`` (nf, 3) unit outward, ``area`` (nf,) m^2,
+    ``radius`` (nf,) m (largest centre-corner distance), ``block`` (nf,), ``dims`` (nf, 2) element
+    divisions of the face grid.
+    """
+    nb = model.n_blocks
+    div = model.block_divisions
+    ijk = ((HEX_NATURAL + 1.0) * 0.5).astype(np.int64)[None] * div[:, None, :]  # (nb, 8, 3)
+    cnode = (model.block_node_start[:-1, None] + ijk[..., 0]
+             + (div[:, None, 0] + 1) * (ijk[..., 1] + (div[:, None, 1] + 1) * ijk[..., 2]))
+    nodes = cnode[:, FACE_CORNERS].reshape(6 * nb, 4)
+    X = x[nodes]
+    centre = X.mean(axis=1)
+    nrm = np.cross(X[:, 2] - X[:, 0], X[:, 3] - X[:, 1])
+    area = 0.5 * np.linalg.norm(nrm, axis=1)
+    nrm /= (2.0 * area)[:, None]
+    block_centre = np.repeat(x[cnode].mean(axis=1), 6, axis=0)
+    nrm *= np.where(np.einsum("ij,ij->i", nrm, centre - block_centre) < 0, -1.0, 1.0)[:, None]
+    return {"nodes": nodes, "X": X, "centre": centre, "normal": nrm, "area": area,
+            "radius": np.linalg.norm(X - centre[:, None], axis=2).max(axis=1),
+            "block": np.repeat(np.arange(nb, dtype=np.int64), 6),
+            "dims": div[:, FACE_AXES].reshape(6 * nb, 2)}
+
+
+def _ball_pairs(tree, centre, radius, ids):
+    """Pairs (i, tree index j) for points ``centre`` (k, 3) of faces ``ids`` within ``radius`` (k,)."""
+    hits = tree.query_ball_point(centre, radius)
+    cnt = np.fromiter((len(h) for h in hits), np.int64, len(hits))
+    if cnt.sum() == 0:
+        return np.zeros((0, 2), np.int64)
+    return np.column_stack([np.repeat(ids, cnt), np.concatenate(hits).astype(np.int64)])
+
+
+def _small_radius(radius):
+    """Largest radius (m) of a "small" face: 1.25 x the 90 % quantile of the face radii."""
+    return 1.25 * float(np.quantile(radius, 0.9))
+
+
+def _candidate_pairs(centre, radius, tol):
+    """Face pairs (i < j) whose bounding spheres (``radius`` + ``tol``) intersect, (np, 2).
+
+    Small faces (:func:`_small_radius`, the bricks) pair through one fixed-radius query; the few
+    larger faces (slabs, beams, foundations) query individually.
+    """
+    tree = cKDTree(centre)
+    r_cut = _small_radius(radius)
+    pairs = [tree.query_pairs(2.0 * r_cut + tol, output_type="ndarray").astype(np.int64)]
+    large = np.flatnonzero(radius > r_cut)
+    if large.size:
+        pairs.append(_ball_pairs(tree, centre[large], radius[large] + r_cut + tol, large))
+        ltree = cKDTree(centre[large])
+        pl = _ball_pairs(ltree, centre[large], radius[large] + radius[large].max() + tol, large)
+        pairs.append(np.column_stack([pl[:, 0], large[pl[:, 1]]]))
+    p = np.sort(np.vstack(pairs), axis=1)
+    key = np.sort(p[:, 0] * centre.shape[0] + p[:, 1])
+    key = key[np.r_[True, key[1:] != key[:-1]]]
+    p = np.column_stack([key // centre.shape[0], key % centre.shape[0]])
+    p = p[p[:, 0] != p[:, 1]]
+    d = np.linalg.norm(centre[p[:, 0]] - centre[p[:, 1]], axis=1)
+    return p[d <= radius[p[:, 0]] + radius[p[:, 1]] + tol]
+
+
+# ---------------------------------------------------------------------------- planar clipping
+def _plane_frame(F, fid):
+    """Origin (n, 3) and in-plane unit axes e1, e2 (n, 3) of faces ``fid`` (e1 x e2 = normal)."""
+    n = F["normal"][fid]
+    e1 = F["X"][fid, 1] - F["X"][fid, 0]
+    e1 -= np.einsum("ij,ij->i", e1, n)[:, None] * n
+    e1 /= np.linalg.norm(e1, axis=1)[:, None]
+    return F["centre"][fid], e1, np.cross(n, e1)
+
+
+def _to_plane(p, origin, e1, e2):
+    """In-plane coordinates (..., 2) of points ``p`` (..., 3); frame arrays broadcast against p."""
+    d = p - origin
+    return np.stack([np.sum(d * e1, axis=-1), np.sum(d * e2, axis=-1)], axis=-1)
+
+
+def _ccw(poly):
+    """Polygons (n, k, 2) reordered counter-clockwise."""
+    a = np.sum(poly[:, :, 0] * np.roll(poly[:, :, 1], -1, axis=1)
+               - np.roll(poly[:, :, 0], -1, axis=1) * poly[:, :, 1], axis=1)
+    return np.where((a < 0)[:, None, None], poly[:, ::-1], poly)
+
+
+def clipped_area(subject, clip):
+    """Areas (m^2) of polygons clipped against convex polygons (batched Sutherland-Hodgman).
+
+    Parameters
+    ----------
+    subject : (n, k, 2) float64
+        polygons (any orientation, simple; need not be convex).
+    clip : (n, 4, 2) float64
+        convex quadrilaterals, counter-clockwise.
+
+    Returns
+    -------
+    (n,) float64, area of each subject inside its clip polygon.
+    """
+    n = subject.shape[0]
+    if n == 0:
+        return np.zeros(0)
+    P = subject
+    cnt = np.full(n, subject.shape[1])
+    rows = np.arange(n)[:, None]
+    for k in range(clip.shape[1]):
+        a = clip[:, k, None, :]
+        e = clip[:, (k + 1) % clip.shape[1], None, :] - a
+        m = P.shape[1]
+        idx = np.arange(m)[None, :]
+        valid = idx < cnt[:, None]
+        nxt = np.where(idx + 1 < cnt[:, None], idx + 1, 0)
+        d = e[..., 1] * (P[..., 0] - a[..., 0]) - e[..., 0] * (P[..., 1] - a[..., 1])  # > 0 outside
+        dn = d[rows, nxt]
+        inside = d <= 0.0
+        keep = inside & valid
+        cross = (inside != (dn <= 0.0)) & valid
+        t = np.where(cross, d / np.where(cross, d - dn, 1.0), 0.0)
+        X = P + t[..., None] * (P[rows, nxt] - P)
+        nout = keep.astype(np.int64) + cross
+        pos = np.cumsum(nout, axis=1) - nout
+        cnt = nout.sum(axis=1)
+        Q = np.zeros((n, max(int(cnt.max()), 1), 2))
+        r, c = np.nonzero(keep)
+        Q[r, pos[r, c]] = P[r, c]
+        r, c = np.nonzero(cross)
+        Q[r, pos[r, c] + keep[r, c]] = X[r, c]
+        P = Q
+    P = np.where(np.arange(P.shape[1])[None, :, None] < cnt[:, None, None], P, P[:, :1])
+    P = P - P[:, :1]
+    Pn = np.roll(P, -1, axis=1)
+    return 0.5 * np.abs(np.sum(P[..., 0] * Pn[..., 1] - Pn[..., 0] * P[..., 1], axis=1))
+
+
+# ---------------------------------------------------------------------------- projection
+def project_bilinear(xq, p, iters=30):
+    """Natural coordinates (r, s) of the closest point to ``p`` on bilinear quads ``xq``.
+
+    Gauss-Newton on the bilinear map, not clamped (|r| > 1 means outside the quad).
+
+    Parameters
+    ----------
+    xq : (n, 4, 3) float64, m
+        quad corners, corner order (-1,-1), (1,-1), (1,1), (-1,1).
+    p : (n, 3) float64, m
+        points.
+
+    Returns
+    -------
+    r, s : (n,) float64
+    """
+    r = np.zeros(p.shape[0])
+    s = np.zeros(p.shape[0])
+    d0 = xq[:, 1] - xq[:, 0]
+    d3 = xq[:, 2] - xq[:, 3]
+    e0 = xq[:, 3] - xq[:, 0]
+    e1 = xq[:, 2] - xq[:, 1]
+    for _ in range(iters):
+        x = 0.25 * ((1 - r) * (1 - s) * xq[:, 0].T + (1 + r) * (1 - s) * xq[:, 1].T
+                    + (1 + r) * (1 + s) * xq[:, 2].T + (1 - r) * (1 + s) * xq[:, 3].T).T
+        a1 = 0.25 * ((1 - s)[:, None] * d0 + (1 + s)[:, None] * d3)
+        a2 = 0.25 * ((1 - r)[:, None] * e0 + (1 + r)[:, None] * e1)
+        res = x - p
+        g1 = np.einsum("ij,ij->i", a1, res)
+        g2 = np.einsum("ij,ij->i", a2, res)
+        j11 = np.einsum("ij,ij->i", a1, a1)
+        j12 = np.einsum("ij,ij->i", a1, a2)
+        j22 = np.einsum("ij,ij->i", a2, a2)
+        det = j11 * j22 - j12 * j12
+        dr = -(j22 * g1 - j12 * g2) / det
+        ds = -(j11 * g2 - j12 * g1) / det
+        r += dr
+        s += ds
+        if np.all(np.abs(dr) + np.abs(ds) < 1e-13):
+            break
+    return r, s
+
+
+def _canonical_quads(quads, x, normal):
+    """Cyclic shift of quads (n, 4) so that edge 0 -> 1 is closest to a reference tangent.
+
+    The reference tangent is the global x axis projected on the plane of unit ``normal`` (n, 3),
+    or the y axis where |normal_x| > 0.9; it depends on the normal only, so coplanar quads of
+    different blocks get the same local frame.
+    """
+    ref = np.where((np.abs(normal[:, 0]) > 0.9)[:, None], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0])
+    ref = ref - np.einsum("ij,ij->i", ref, normal)[:, None] * normal
+    xq = x[quads]
+    edges = np.roll(xq, -1, axis=1) - xq
+    score = np.einsum("nkj,nj->nk", edges, ref) / np.linalg.norm(edges, axis=2)
+    k = np.argmax(score, axis=1)
+    return quads[np.arange(quads.shape[0])[:, None], (k[:, None] + np.arange(4)) % 4]
+
+
+def _locate(model, F, fid, p, x, slack):
+    """Master quad and its (r, s) for points ``p`` (n, 3) on block faces ``fid`` (n,) at ``x``.
+
+    Returns ``quads`` (n, 4) canonical node ids, ``xi`` (n, 2) clamped to [-1, 1], and
+    ``outside`` (n,) the in-plane distance (m) of the point outside its face (0 inside, within
+    ``slack`` on the face's natural coordinates).
+    """
+    R, S = project_bilinear(F["X"][fid], p)
+    dims = F["dims"][fid]
+    i = np.clip(np.floor((R + 1.0) * 0.5 * dims[:, 0]).astype(np.int64), 0, dims[:, 0] - 1)
+    j = np.clip(np.floor((S + 1.0) * 0.5 * dims[:, 1]).astype(np.int64), 0, dims[:, 1] - 1)
+    faces, inv = np.unique(fid, return_inverse=True)
+    fq = [model.block_face(f // 6, f % 6)[1] for f in faces]
+    offset = np.cumsum([0] + [q.shape[0] for q in fq])[:-1]
+    quads = np.concatenate(fq)[offset[inv] + i * dims[:, 1] + j]
+    quads = _canonical_quads(quads, x, F["normal"][fid])
+    r, s = project_bilinear(x[quads], p)
+    Rc, Sc = np.clip(R, -1.0, 1.0), np.clip(S, -1.0, 1.0)
+    Xf = F["X"][fid]
+    xc = 0.25 * ((1 - Rc) * (1 - Sc) * Xf[:, 0].T + (1 + Rc) * (1 - Sc) * Xf[:, 1].T
+                 + (1 + Rc) * (1 + Sc) * Xf[:, 2].T + (1 - Rc) * (1 + Sc) * Xf[:, 3].T).T
+    dp = p - xc
+    dp -= np.einsum("ij,ij->i", dp, F["normal"][fid])[:, None] * F["normal"][fid]
+    inside = (np.abs(R) <= 1.0 + slack) & (np.abs(S) <= 1.0 + slack)
+    outside = np.where(inside, 0.0, np.linalg.norm(dp, axis=1))
+    return quads, np.column_stack([np.clip(r, -1.0, 1.0), np.clip(s, -1.0, 1.0)]), outside
+
+
+def _gaps(x, slave, master, xi):
+    """Local gaps (nc, 3) [u, d1, d2] (m) from ``kernels.contact_frame.local_gap``."""
+    g = np.empty((slave.shape[0], 3))
+    xs = x[slave]
+    xq = x[master]
+    for c in range(slave.shape[0]):
+        local_gap(xs[c], xq[c], xi[c, 0], xi[c, 1], g[c])
+    return g
+
+
+def _laws(model, bs, bm):
+    """Joint-law index of block pairs (slave ``bs``, master ``bm``), see the module notes."""
+    bj = model.block_joint
+    js, jm = bj[bs], bj[bm]
+    both = (js >= 0) & (jm >= 0)
+    law = np.where(both, np.where(bs < bm, js, jm),
+                   np.where(js >= 0, js, np.where(jm >= 0, jm, model.default_joint)))
+    if np.any(law < 0):
+        k = int(np.flatnonzero(law < 0)[0])
+        raise ModelError(f"blocks {int(bs[k])} and {int(bm[k])} touch but no joint law is given: "
+                         "call Model.set_joint_law(...) or give a block joint")
+    return law.astype(np.int64)
+
+
+# ---------------------------------------------------------------------------- detection
+def _quarter_quads(uv):
+    """Quarter-quads of a stack of face grids ``uv`` (P, m1+1, m2+1, 2).
+
+    Returns polygons (P, m1, m2, 4, 4, 2) and the grid index (i, j) offsets (4, 2) of their owner
+    node (corner 0 of each polygon) relative to the element's (i, j).
+    """
+    c00, c10, c11, c01 = uv[:, :-1, :-1], uv[:, 1:, :-1], uv[:, 1:, 1:], uv[:, :-1, 1:]
+    mid = 0.25 * (c00 + c10 + c11 + c01)
+    ma, mb, mc, md = 0.5 * (c00 + c10), 0.5 * (c10 + c11), 0.5 * (c11 + c01), 0.5 * (c01 + c00)
+    polys = np.stack([np.stack([c00, ma, mid, md], axis=-2), np.stack([c10, mb, mid, ma], axis=-2),
+                      np.stack([c11, mc, mid, mb], axis=-2), np.stack([c01, md, mid, mc], axis=-2)],
+                     axis=-3)
+    return polys, np.array([[0, 0], [1, 0], [1, 1], [0, 1]])
+
+
+def detect_contacts(model, tol=None, angle_tol=ANGLE_TOL):
+    """Find all node-to-face contact points of ``model`` in its reference configuration.
+
+    Sets ``model.contacts`` and returns it.
+
+    Parameters
+    ----------
+    model : Model
+    tol : float or None, m
+        coplanarity tolerance: two opposite faces touch if their planes are at most ``tol``
+        apart. None: ``REL_TOL`` (1e-6) times the diagonal of the model's bounding box (far above
+        the round-off of generated geometry, far below any physical gap).
+    angle_tol : float, rad
+        two faces are opposite if the angle between one normal and the reverse of the other is
+        below ``angle_tol``.
+
+    Returns
+    -------
+    ContactSet
+    """
+    x = model.nodes
+    if model.n_blocks < 2:
+        model.contacts = ContactSet.empty()
+        return model.contacts
+    if tol is None:
+        tol = REL_TOL * float(np.linalg.norm(np.ptp(x, axis=0)))
+    if not (np.isfinite(tol) and tol >= 0.0):
+        raise ModelError(f"detect_contacts: tol must be a finite length >= 0 m, got {tol}")
+    if not (np.isfinite(angle_tol) and 0.0 <= angle_tol < 0.5 * np.pi):
+        raise ModelError(f"detect_contacts: angle_tol must be in [0, pi/2) rad, got {angle_tol}")
+    F = _faces(model, x)
+    blk = F["block"]
+    p = _candidate_pairs(F["centre"], F["radius"], tol)
+    a, b = p[:, 0], p[:, 1]
+    nrm, cen = F["normal"], F["centre"]
+    fixed = model.block_fixed
+    ok = ((blk[a] != blk[b]) & ~(fixed[blk[a]] & fixed[blk[b]])
+          & (np.einsum("ij,ij->i", nrm[a], nrm[b]) < -np.cos(angle_tol))
+          & (np.abs(np.einsum("ij,ij->i", cen[b] - cen[a], nrm[a])) <= tol)
+          & (np.abs(np.einsum("ij,ij->i", cen[a] - cen[b], nrm[b])) <= tol))
+    a, b = a[ok], b[ok]
+    # slave = finer face mesh (smaller element-face area), tie -> lower block id
+    h = F["area"] / F["dims"].prod(axis=1)
+    ha, hb = h[a], h[b]
+    tie = np.abs(ha - hb) <= 1e-9 * np.maximum(ha, hb)
+    a_slave = np.where(tie, blk[a] < blk[b], ha < hb)
+    fs, fm = np.where(a_slave, a, b), np.where(a_slave, b, a)
+    # overlap of the two face polygons in the master plane
+    org, e1, e2 = _plane_frame(F, fm)
+    clip = _ccw(_to_plane(F["X"][fm], org[:, None], e1[:, None], e2[:, None]))
+    overlap = clipped_area(_to_plane(F["X"][fs], org[:, None], e1[:, None], e2[:, None]), clip)
+    keep = overlap > AREA_TOL * np.minimum(h[fs], h[fm])
+    fs, fm, org, e1, e2, clip = fs[keep], fm[keep], org[keep], e1[keep], e2[keep], clip[keep]
+    if fs.size == 0:
+        model.contacts = ContactSet.empty()
+        return model.contacts
+    # tributary areas of the slave nodes, grouped by slave face grid shape
+    rows_pair, rows_node, rows_area = [], [], []
+    dims_s = F["dims"][fs]
+    for m1, m2 in np.unique(dims_s, axis=0):
+        g = np.flatnonzero((dims_s[:, 0] == m1) & (dims_s[:, 1] == m2))
+        grids = np.stack([model.block_face(f // 6, f % 6)[0] for f in fs[g]])  # (P, m1+1, m2+1)
+        uv = _to_plane(x[grids], org[g, None, None], e1[g, None, None], e2[g, None, None])
+        polys, off = _quarter_quads(uv)
+        P = g.size
+        ii, jj = np.meshgrid(np.arange(m1), np.arange(m2), indexing="ij")
+        owner = ((ii[..., None] + off[:, 0]) * (m2 + 1) + jj[..., None] + off[:, 1])  # (m1, m2, 4)
+        cl = np.broadcast_to(clip[g, None, None, None], (P, m1, m2, 4, 4, 2))
+        ar = clipped_area(polys.reshape(-1, 4, 2), cl.reshape(-1, 4, 2)).reshape(P, -1)
+        ngrid = (m1 + 1) * (m2 + 1)
+        key = (np.arange(P)[:, None] * ngrid + owner.reshape(1, -1)).ravel()
+        node_area = np.bincount(key, weights=ar.ravel(), minlength=P * ngrid).reshape(P, ngrid)
+        pp, nn = np.nonzero(node_area > AREA_TOL * h[fs[g]][:, None])
+        rows_pair.append(g[pp])
+        rows_node.append(grids.reshape(P, ngrid)[pp, nn])
+        rows_area.append(node_area[pp, nn])
+    pair = np.concatenate(rows_pair)
+    slave = np.concatenate(rows_node)
+    area = np.concatenate(rows_area)
+    fmr = fm[pair]
+    master, xi, _ = _locate(model, F, fmr, x[slave], x, SLIDE_SLACK)
+    bl = np.column_stack([blk[fs[pair]], blk[fmr]])
+    order = np.lexsort((bl[:, 1], slave))
+    cs = ContactSet(slave[order], master[order], xi[order], area[order],
+                    _laws(model, bl[order, 0], bl[order, 1]), bl[order], np.zeros((slave.size, 3)))
+    cs.gap0 = _gaps(x, cs.slave, cs.master, cs.xi)
+    model.contacts = cs
+    return cs
+
+
+def redetect(model, contacts, x_current, slack=SLIDE_SLACK, reach=None):
+    """Re-assign slave nodes that slid off their master quad (finite sliding).
+
+    A contact point whose slave node now projects outside its master quad (|r| or |s| >
+    1 + ``slack``) moves to the quad of the block face (of any block but its own, facing the old
+    master face) that now contains the projection and lies within ``reach`` along its normal,
+    the nearest such face if several; its ``xi`` becomes the new projection and ``gap0`` is reset
+    so that the local gap [u, d1, d2] seen by the force kernel is unchanged at the switch (the
+    joint history carries over). If no face contains the projection, the point stays as it is
+    while the projection is at most ``reach`` outside its old master face (its tributary region
+    still overlaps), and is dropped beyond (the node has slid off the surface).
+
+    Parameters
+    ----------
+    model : Model
+    contacts : ContactSet
+    x_current : (n_nodes, 3) float64, m
+        current nodal coordinates.
+    slack : float
+        tolerance on the natural coordinates.
+    reach : float or None, m
+        normal and in-plane search distance; None: half the largest element edge of the slave
+        block, per contact point.
+
+    Returns
+    -------
+    new : ContactSet
+        the updated set (same row order, dropped rows removed).
+    src : (new.n,) int64
+        row of ``contacts`` each row of ``new`` comes from (carry the joint history with it).
+    """
+    x = np.asarray(x_current, dtype=np.float64)
+    if x.shape != (model.n_nodes, 3) or not np.all(np.isfinite(x)):
+        raise ModelError(f"redetect: x_current must be finite with shape ({model.n_nodes}, 3), "
+                         f"got shape {x.shape}")
+    nc = contacts.n
+    src = np.arange(nc, dtype=np.int64)
+    if nc == 0:
+        return contacts, src
+    xs = x[contacts.slave]
+    r, s = project_bilinear(x[contacts.master], xs)
+    moved = np.flatnonzero((np.abs(r) > 1.0 + slack) | (np.abs(s) > 1.0 + slack))
+    if moved.size == 0:
+        return contacts, src
+    bs = contacts.blocks[moved, 0]
+    if reach is None:
+        c = model.block_corners
+        edge = np.stack([np.linalg.norm(c[:, 1] - c[:, 0], axis=1),
+                         np.linalg.norm(c[:, 3] - c[:, 0], axis=1),
+                         np.linalg.norm(c[:, 4] - c[:, 0], axis=1)], axis=1)
+        reach = 0.5 * (edge / model.block_divisions).max(axis=1)[bs]
+    reach = np.broadcast_to(np.asarray(reach, dtype=np.float64), moved.shape)
+    if not np.all(np.isfinite(reach) & (reach > 0)):
+        raise ModelError(f"redetect: reach must be positive lengths (m), got {reach}")
+    F = _faces(model, x)
+    # normal of the old master quad, current configuration
+    xq = x[contacts.master[moved]]
+    n_old = np.cross(xq[:, 2] - xq[:, 0], xq[:, 3] - xq[:, 1])
+    n_old /= np.linalg.norm(n_old, axis=1)[:, None]
+    row, fid = _near_faces(F, xs[moved], reach)
+    u = np.einsum("ij,ij->i", xs[moved][row] - F["centre"][fid], F["normal"][fid])
+    ok = ((F["block"][fid] != bs[row]) & (np.einsum("ij,ij->i", F["normal"][fid], n_old[row]) > 0.5)
+          & (np.abs(u) <= reach[row]))
+    row, fid, u = row[ok], fid[ok], u[ok]
+    R, S = project_bilinear(F["X"][fid], xs[moved][row])
+    ok = (np.abs(R) <= 1.0 + slack) & (np.abs(S) <= 1.0 + slack)
+    row, fid, u = row[ok], fid[ok], u[ok]
+    best = np.lexsort((np.abs(u), row))
+    row, fid = row[best], fid[best]
+    first = np.r_[True, row[1:] != row[:-1]]
+    row, fid = row[first], fid[first]
+    new = contacts.subset(np.arange(nc))
+    if row.size:
+        k = moved[row]
+        quads, xi, _ = _locate(model, F, fid, xs[k], x, slack)
+        g_old = _gaps(x, contacts.slave[k], contacts.master[k], contacts.xi[k]) - contacts.gap0[k]
+        new.master[k], new.xi[k] = quads, xi
+        new.blocks[k, 1] = F["block"][fid]
+        new.law[k] = _laws(model, new.blocks[k, 0], new.blocks[k, 1])
+        new.gap0[k] = _gaps(x, new.slave[k], quads, xi) - g_old
+    # points no face took: keep while their old master face is within reach, else drop
+    lost = np.setdiff1d(np.arange(moved.size), row)
+    drop = np.zeros(nc, bool)
+    if lost.size:
+        k = moved[lost]
+        fm = 6 * contacts.blocks[k, 1] + _face_of_quads(model, contacts.blocks[k, 1],
+                                                        contacts.master[k])
+        _, _, outside = _locate(model, F, fm, xs[k], x, slack)
+        drop[k] = outside > reach[lost]
+    keep = np.flatnonzero(~drop)
+    return new.subset(keep), src[keep]
+
+
+def _near_faces(F, p, reach):
+    """Pairs (point row, face id) with point ``p`` (n, 3) within face radius + ``reach`` (n,)."""
+    radius = F["radius"]
+    r_cut = _small_radius(radius)
+    pr = _ball_pairs(cKDTree(F["centre"]), p, r_cut + reach, np.arange(p.shape[0]))
+    large = np.flatnonzero(radius > r_cut)
+    pr = np.vstack([pr[radius[pr[:, 1]] <= r_cut],
+                    np.column_stack([np.repeat(np.arange(p.shape[0]), large.size),
+                                     np.tile(large, p.shape[0])])])
+    d = np.linalg.norm(p[pr[:, 0]] - F["centre"][pr[:, 1]], axis=1)
+    pr = pr[d <= radius[pr[:, 1]] + reach[pr[:, 0]]]
+    return pr[:, 0], pr[:, 1]
+
+
+def _face_of_quads(model, blocks, quads):
+    """Block face (0..5) of master quads (n, 4) of ``blocks`` (n,): the face holding all 4 nodes."""
+    div = model.block_divisions[blocks]
+    loc = quads - model.block_node_start[blocks][:, None]
+    ijk = np.stack([loc % (div[:, 0, None] + 1),
+                    (loc // (div[:, 0, None] + 1)) % (div[:, 1, None] + 1),
+                    loc // ((div[:, 0, None] + 1) * (div[:, 1, None] + 1))], axis=2)  # (n, 4, 3)
+    f = np.full(blocks.shape[0], -1, np.int64)
+    for face, (axis, side) in enumerate(BLOCK_FACES):
+        level = 0 if side < 0 else div[:, axis]
+        f[(f < 0) & np.all(ijk[:, :, axis] == np.reshape(level, (-1, 1)), axis=1)] = face
+    return f
