@@ -1,0 +1,197 @@
+"""Loading: supports, rigid reference points, load patterns, controls and stages.
+
+A run is a list of :class:`Stage` objects. A stage has a number of load increments and a list of
+controls; every control ramps its value linearly from where the previous stage left it to ``to``
+over the stage's increments, or follows an explicit ``path`` (one value per increment, e.g. a
+cyclic protocol). Controls that a stage does not mention keep their last value: a pre-compression
+force applied in stage 1 stays while stage 2 moves the beam.
+
+Controls
+--------
+:class:`Displacement`  prescribed displacement (m) or rotation (rad) of a DOF of a node set or of a
+                       rigid reference point; its reaction is recorded.
+:class:`Force`         a constant-magnitude generalised force (N or N m) on a reference-point DOF.
+:class:`Load`          a load pattern whose factor is prescribed (gravity, pressure, body forces).
+:class:`Indirect`      indirect displacement control: the factor of a load pattern is the unknown
+                       chosen so that a control DOF follows its target (softening branches under
+                       pressure, equal floor forces, rocking peaks).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+DOFS = {"x": 0, "y": 1, "z": 2, "rx": 3, "ry": 4, "rz": 5}
+
+
+class LoadingError(ValueError):
+    """Invalid loading input; the message names the control and the value."""
+
+
+def dof_index(dof, rotations=True):
+    """Index 0..5 of a DOF name ``x, y, z, rx, ry, rz``."""
+    if dof not in DOFS or (not rotations and DOFS[dof] > 2):
+        valid = list(DOFS)[: 6 if rotations else 3]
+        raise LoadingError(f"unknown DOF {dof!r}; valid: {valid}")
+    return DOFS[dof]
+
+
+@dataclass(eq=False)
+class RigidPoint:
+    """A reference point tied rigidly to a set of nodes (loading beams, slabs): 6 DOFs.
+
+    Created by ``Simulation.rigid_point``; all DOFs are free and unloaded until a control acts.
+    """
+    name: str
+    nodes: np.ndarray
+    position: np.ndarray
+    index: int = -1
+
+
+@dataclass(eq=False)
+class NodeSet:
+    """A named set of node ids (int64 array)."""
+    name: str
+    nodes: np.ndarray
+
+
+# ------------------------------------------------------------------ load patterns
+@dataclass(eq=False)
+class Gravity:
+    """Self-weight: body force density * g along -z on every non-fixed block (factor 1 = 1 g)."""
+    g: float = 9.81
+    name: str = "gravity"
+
+
+@dataclass(eq=False)
+class BodyForce:
+    """Mass-proportional body force, acceleration ``accel`` (3,) m/s^2 per unit factor.
+
+    ``blocks``: block ids (None = every non-fixed block). Used for seismic-like pushover patterns.
+    """
+    accel: tuple
+    blocks: object = None
+    name: str = "body"
+
+
+@dataclass(eq=False)
+class Pressure:
+    """Pressure (Pa per unit factor) on element faces ``quads`` (m, 4) node ids, acting against
+    their normal (positive pressure pushes into the face's block), reference configuration."""
+    quads: np.ndarray
+    name: str = "pressure"
+
+
+@dataclass(eq=False)
+class PointLoad:
+    """A force (N per unit factor) on a DOF of a rigid point, or shared equally by a node set."""
+    target: object
+    dof: str
+    value: float = 1.0
+    name: str = "point"
+
+
+@dataclass(eq=False)
+class Combined:
+    """Several patterns summed with weights: ``Combined([(pattern, weight), ...])``."""
+    parts: list
+    name: str = "combined"
+
+
+# ------------------------------------------------------------------ controls
+@dataclass(eq=False)
+class _Control:
+    to: float = None
+    path: object = None
+    name: str = None
+
+    def values(self, start, n):
+        """Target values (n,) of this control over a stage of n increments starting at ``start``."""
+        if self.path is not None:
+            p = np.asarray(self.path, dtype=np.float64).ravel()
+            if p.size != n:
+                raise LoadingError(f"control {self.label}: path has {p.size} values, stage has {n} "
+                                   f"increments")
+            if not np.all(np.isfinite(p)):
+                raise LoadingError(f"control {self.label}: path contains NaN or Inf")
+            return p
+        if self.to is None:
+            return np.full(n, start)
+        if not np.isfinite(self.to):
+            raise LoadingError(f"control {self.label}: target {self.to} is not finite")
+        return start + (self.to - start) * np.arange(1, n + 1) / n
+
+    @property
+    def label(self):
+        return self.name or type(self).__name__
+
+
+@dataclass(eq=False)
+class Displacement(_Control):
+    """Prescribed displacement (m) or rotation (rad) of DOF ``dof`` of ``target`` (RigidPoint or NodeSet)."""
+    target: object = None
+    dof: str = "x"
+
+
+@dataclass(eq=False)
+class Force(_Control):
+    """Generalised force (N, or N m for rotations) on DOF ``dof`` of RigidPoint ``target``."""
+    target: object = None
+    dof: str = "z"
+
+
+@dataclass(eq=False)
+class Load(_Control):
+    """Prescribed factor of load pattern ``pattern``."""
+    pattern: object = None
+
+
+@dataclass(eq=False)
+class Indirect(_Control):
+    """Factor of ``pattern`` chosen so that DOF ``dof`` of ``target`` follows the target values."""
+    pattern: object = None
+    target: object = None
+    dof: str = "x"
+
+
+@dataclass(eq=False)
+class Stage:
+    """A loading stage: ``increments`` load increments over which ``controls`` move.
+
+    ``frames``: write a field frame every this many increments (and at the stage's end);
+    ``max_iter``/``tol`` override the solver options for this stage.
+    """
+    name: str
+    increments: int
+    controls: list = field(default_factory=list)
+    frames: int = 1
+    max_iter: int = None
+    tol: float = None
+
+    def __post_init__(self):
+        if int(self.increments) < 1:
+            raise LoadingError(f"stage {self.name!r}: increments must be >= 1, got {self.increments}")
+        self.increments = int(self.increments)
+        if sum(isinstance(c, Indirect) for c in self.controls) > 1:
+            raise LoadingError(f"stage {self.name!r}: at most one Indirect control per stage")
+
+
+def cyclic_path(amplitudes, cycles=2, points_per_quarter=4, start_negative=False):
+    """Target values of a cyclic protocol: ``cycles`` full cycles 0 -> +a -> -a -> 0 per amplitude.
+
+    Returns an array of targets (one per increment); ``points_per_quarter`` increments on every
+    quarter cycle.
+    """
+    amps = np.asarray(amplitudes, dtype=np.float64).ravel()
+    if amps.size == 0 or np.any(amps <= 0) or not np.all(np.isfinite(amps)):
+        raise LoadingError(f"cyclic protocol: amplitudes must be positive and finite, got {amps}")
+    k = int(points_per_quarter)
+    sgn = -1.0 if start_negative else 1.0
+    q = np.arange(1, k + 1) / k
+    out = []
+    for a in amps:
+        for _ in range(int(cycles)):
+            out += list(sgn * a * q) + list(sgn * a * (1 - q))
+            out += list(-sgn * a * q) + list(-sgn * a * (1 - q))
+    return np.asarray(out)

@@ -1,0 +1,565 @@
+"""The increment loop: builds the arrays, marches every load increment to rest, records results.
+
+Physics lives in ``kernels/``; this module only orchestrates: fictitious masses from Gershgorin
+bounds, constraints and controls per increment, convergence checks, increment cutting, commit of
+history variables, energy audit, guards and output (through ``dr_masonry.results``).
+"""
+from __future__ import annotations
+
+import json
+import time
+from collections import namedtuple
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from . import loading as L
+from .kernels import relaxation as R
+from .kernels.assembly import node_row_map
+from .kernels.contact_forces import contact_rowsum
+from .kernels.hex8 import hex_geometry, lumped_mass, stiffness_rowsum
+from .kernels.joint_law import JS_D, JS_DISS, JS_DMAX
+from .kernels.plastic_damage import MS_DC, MS_DISS, MS_DT
+
+Mesh = namedtuple("Mesh", "conn active dN wdet h emat mparams s_old s_new fbuf energy ptr rows")
+Cont = namedtuple("Cont", "slave master xi area law lparams gap0 s_old s_new gaps trac fbuf psi ptr rows")
+Dyn = namedtuple("Dyn", "X U V minv free tied fext P fint res rpX rpU rpV rpminv rpfree rpf rpP "
+                        "rpptr rpnodes rpradius")
+
+DAMPING = {"kinetic": R.DAMP_KINETIC, "viscous": R.DAMP_VISCOUS, "local": R.DAMP_LOCAL}
+
+
+class SolverError(RuntimeError):
+    """A run stopped: the message says where (increment, node/block) and which quantity."""
+
+
+@dataclass
+class SolverOptions:
+    """Dynamic-relaxation settings (defaults chosen by the benchmarks, see BENCHMARKS.md).
+
+    damping : "viscous" (default) | "kinetic" | "local"
+    alpha : damping parameter (local: Cundall's coefficient, 0.8; viscous: fraction of the
+        critical damping of the Rayleigh-quotient frequency, 1.0)
+    tol : an increment is converged when ||out-of-balance|| <= tol * ||applied loads + reactions||
+    safety : fictitious masses = safety * Gershgorin row sum / 4 (stable for safety >= 1)
+    max_iter : iteration cap of one increment before it is cut in two
+    max_cuts : how many times an increment may be halved before the run stops
+    check_every : iterations between convergence checks
+    energy_tol : energy-balance error (fraction of external work) above which a warning is recorded
+    predictor : start each increment from the previous one's displacement increment (same direction)
+    progress : show a progress bar
+    """
+    damping: str = "viscous"
+    alpha: float = None
+    tol: float = 1e-4
+    safety: float = 1.1
+    max_iter: int = 200_000
+    max_cuts: int = 4
+    check_every: int = 10
+    energy_tol: float = 0.01
+    predictor: bool = True
+    progress: bool = False
+
+    def __post_init__(self):
+        if self.damping not in DAMPING:
+            raise ValueError(f"SolverOptions.damping: {self.damping!r} is not one of {list(DAMPING)}")
+        if self.alpha is None:
+            self.alpha = {"viscous": 1.0, "local": 0.8, "kinetic": 0.0}[self.damping]
+        for name in ("tol", "safety", "energy_tol"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v > 0):
+                raise ValueError(f"SolverOptions.{name} must be positive and finite, got {v}")
+        if self.safety < 1.0:
+            raise ValueError(f"SolverOptions.safety must be >= 1 for a stable step, got {self.safety}")
+        if self.max_iter < 1 or self.check_every < 1 or self.max_cuts < 0:
+            raise ValueError("SolverOptions: max_iter and check_every must be >= 1, max_cuts >= 0")
+
+
+class Simulation:
+    """A model with supports, reference points and options, ready to run stages.
+
+    Parameters
+    ----------
+    model : Model
+        the block assembly; contacts are detected here if the model has none yet.
+    options : SolverOptions
+    output : str or None
+        HDF5 result path (None keeps results in memory only).
+    config : dict
+        the scene's input parameters, stored in the result file.
+    """
+
+    def __init__(self, model, options=None, output=None, config=None):
+        from .contact_search import detect_contacts
+        self.model = model
+        self.options = options or SolverOptions()
+        self.output = output
+        self.config = dict(config or {})
+        if model.n_blocks == 0:
+            raise ValueError("model has no blocks")
+        if model.contacts is None:
+            detect_contacts(model)
+        self.rigid_points = []
+        self.node_sets = {}
+        self._fixed = np.zeros((model.n_nodes, 3), dtype=bool)
+        fixed_blocks = np.nonzero(model.block_fixed)[0]
+        self._fixed[model.block_nodes(fixed_blocks)] = True
+        self._built = False
+        self.history = {}
+        self.increment = 0
+
+    # ------------------------------------------------------------------ set-up API
+    def node_set(self, name, nodes):
+        """Register a named node set (int array of node ids)."""
+        nodes = np.unique(np.asarray(nodes, dtype=np.int64))
+        if nodes.size == 0 or nodes.min() < 0 or nodes.max() >= self.model.n_nodes:
+            raise L.LoadingError(f"node set {name!r}: node ids must be in [0, {self.model.n_nodes})")
+        ns = L.NodeSet(name, nodes)
+        self.node_sets[name] = ns
+        return ns
+
+    def fix(self, nodes, dofs="xyz"):
+        """Clamp DOFs (any of 'x', 'y', 'z') of the given nodes (supports, symmetry planes)."""
+        nodes = np.asarray(nodes, dtype=np.int64)
+        for d in dofs:
+            self._fixed[nodes, L.dof_index(d, rotations=False)] = True
+
+    def rigid_point(self, name, blocks=None, nodes=None, position=None):
+        """Tie the nodes of ``blocks`` (or ``nodes``) rigidly to a reference point with 6 DOFs.
+
+        ``position`` defaults to the centroid of the nodes. Returns the :class:`RigidPoint`.
+        """
+        if self._built:
+            raise L.LoadingError("rigid points must be created before the first run")
+        if nodes is None:
+            if blocks is None:
+                raise L.LoadingError(f"rigid point {name!r}: give blocks or nodes")
+            nodes = self.model.block_nodes(blocks)
+        nodes = np.unique(np.asarray(nodes, dtype=np.int64))
+        for rp in self.rigid_points:
+            if np.intersect1d(rp.nodes, nodes).size:
+                raise L.LoadingError(f"rigid point {name!r} shares nodes with {rp.name!r}")
+        pos = self.model.nodes[nodes].mean(axis=0) if position is None else np.asarray(position, float)
+        rp = L.RigidPoint(name, nodes, pos, len(self.rigid_points))
+        self.rigid_points.append(rp)
+        return rp
+
+    # ------------------------------------------------------------------ arrays
+    def _build(self):
+        m = self.model
+        o = self.options
+        X = m.nodes
+        conn = m.elements
+        n = m.n_nodes
+        dN, wdet, h = hex_geometry(X, conn)
+        emat = m.block_material[m.element_block]
+        mats = m.materials
+        mparams = np.ascontiguousarray(np.vstack([mt.params_array() for mt in mats]))
+        for i, mt in enumerate(mats):  # crack band: refuse elements too large for the softening
+            on = emat == i
+            if on.any() and not mt.stays_elastic:
+                mt.check_element_size(float(h[on].max()))
+        rho = np.array([mt.density for mt in mats])[emat]
+        E = np.array([mt.E for mt in mats])[emat]
+        nu = np.array([mt.nu for mt in mats])[emat]
+        active = np.nonzero(~m.block_fixed[m.element_block])[0].astype(np.int64)
+        s0 = np.stack([mt.initial_state() for mt in mats])[emat]
+        s_old = np.ascontiguousarray(np.repeat(s0[:, None, :], 8, axis=1))
+        ptr, rows = node_row_map(conn, n)
+        self.mesh = Mesh(conn, active, dN, wdet, h, emat, mparams, s_old, s_old.copy(),
+                         np.zeros((conn.shape[0], 8, 3)), np.zeros(conn.shape[0]), ptr, rows)
+        self.mass = lumped_mass(conn, wdet, rho, n)  # physical, kg
+        rowsum = stiffness_rowsum(conn, dN, wdet, E, nu, n)
+        c = m.contacts
+        laws = m.joint_laws
+        if c.n:
+            lparams = np.ascontiguousarray(np.vstack([lw.params_array() for lw in laws]))
+            kb = np.array([lw.stiffness_bound() for lw in laws])[c.law]
+            rowsum = rowsum + contact_rowsum(c.slave, c.master, c.xi, c.area, kb, n)
+            js0 = np.stack([lw.initial_state() for lw in laws])[c.law]
+        else:
+            from .kernels.joint_law import NJP, NJS
+            lparams = np.zeros((1, NJP))
+            js0 = np.zeros((0, NJS))
+        cptr, crows = node_row_map(np.column_stack([c.slave, c.master]), n)
+        nc = c.n
+        self.cont = Cont(c.slave, c.master, c.xi, c.area, c.law, lparams, c.gap0,
+                         np.ascontiguousarray(js0), js0.copy(), np.zeros((nc, 3)), np.zeros((nc, 3)),
+                         np.zeros((nc * 5, 3)), np.zeros(nc), cptr, crows)
+        free_nodes = ~self._fixed.all(axis=1)
+        if np.any(rowsum[free_nodes] <= 0):
+            bad = int(np.nonzero(free_nodes & (rowsum <= 0))[0][0])
+            raise SolverError(f"node {bad} (block {m.node_block[bad]}) has no stiffness: it belongs to "
+                              f"no active element and no contact")
+        fict = np.where(rowsum > 0, o.safety * rowsum / 4.0, 1.0)
+        free = (~self._fixed).astype(np.float64)
+        tied = np.full(n, -1, dtype=np.int64)
+        nr = len(self.rigid_points)
+        rpX = np.zeros((nr, 3))
+        rpminv = np.ones((nr, 6))
+        rpradius = np.ones(nr)
+        rpptr = np.zeros(nr + 1, dtype=np.int64)
+        for p, rp in enumerate(self.rigid_points):
+            if self._fixed[rp.nodes].any():
+                raise L.LoadingError(f"rigid point {rp.name!r} ties nodes that are also fixed")
+            tied[rp.nodes] = p
+            free[rp.nodes] = 0.0
+            rpX[p] = rp.position
+            arm2 = ((X[rp.nodes] - rp.position) ** 2).sum(axis=1)
+            mt = fict[rp.nodes].sum()
+            jr = (fict[rp.nodes] * arm2).sum()
+            rpminv[p, :3] = 1.0 / mt
+            rpminv[p, 3:] = 1.0 / max(jr, 1e-300)
+            rpradius[p] = np.sqrt(max(jr / mt, 1e-300))
+            rpptr[p + 1] = rpptr[p] + rp.nodes.size
+        rpnodes = (np.concatenate([rp.nodes for rp in self.rigid_points]) if nr
+                   else np.zeros(0, np.int64))
+        z = np.zeros((n, 3))
+        self.dyn = Dyn(X, z.copy(), z.copy(), 1.0 / fict, free, tied, z.copy(), z.copy(), z.copy(),
+                       z.copy(), rpX, np.zeros((nr, 6)), np.zeros((nr, 6)), rpminv,
+                       np.ones((nr, 6)), np.zeros((nr, 6)), np.zeros((nr, 6)), rpptr, rpnodes,
+                       rpradius)
+        self.size = float(np.max(np.ptp(X, axis=0)))
+        self.ref_floor = 1e-9 * float(rowsum.max()) * self.size
+        self.lam = np.zeros(1)
+        self.rp_force = np.zeros((nr, 6))  # Force-control values on reference-point DOFs
+        self.values = {}       # control key -> current value
+        self.factors = {}      # pattern -> current factor (load-controlled)
+        self.patterns = {}     # pattern -> (P (n,3), rpP (nr,6))
+        self.presc = {}        # (node set name, dof) -> (nodes, dof)
+        self.energy = dict(W_ext=0.0, E_damped=0.0)
+        self.f_prev = np.zeros((n, 3))
+        self.du_prev = None
+        self.dctl_prev = 0.0
+        self.writer = None
+        if self.output is not None:
+            import os
+            from .results import ResultWriter
+            os.makedirs(os.path.dirname(os.path.abspath(self.output)), exist_ok=True)
+            cfg = dict(self.config, solver=asdict(self.options))
+            self.writer = ResultWriter(self.output, m, cfg)
+        self._built = True
+
+    # ------------------------------------------------------------------ patterns
+    def _pattern(self, pat):
+        if pat in self.patterns:
+            return self.patterns[pat]
+        m = self.model
+        n = m.n_nodes
+        P = np.zeros((n, 3))
+        rpP = np.zeros((len(self.rigid_points), 6))
+        if isinstance(pat, (L.Gravity, L.BodyForce)):
+            acc = np.array([0.0, 0.0, -pat.g]) if isinstance(pat, L.Gravity) else np.asarray(pat.accel, float)
+            blocks = getattr(pat, "blocks", None)
+            blocks = np.nonzero(~m.block_fixed)[0] if blocks is None else np.asarray(blocks)
+            nodes = m.block_nodes(blocks)
+            P[nodes] = self.mass[nodes, None] * acc[None, :]
+        elif isinstance(pat, L.Pressure):
+            q = np.asarray(pat.quads, dtype=np.int64)
+            x = m.nodes[q]
+            av = 0.5 * np.cross(x[:, 2] - x[:, 0], x[:, 3] - x[:, 1])  # area vector, outward
+            for a in range(4):
+                np.add.at(P, q[:, a], -0.25 * av)
+        elif isinstance(pat, L.PointLoad):
+            k = L.dof_index(pat.dof, rotations=isinstance(pat.target, L.RigidPoint))
+            if isinstance(pat.target, L.RigidPoint):
+                rpP[pat.target.index, k] = pat.value
+            else:
+                P[pat.target.nodes, k] = pat.value / pat.target.nodes.size
+        elif isinstance(pat, L.Combined):
+            for part, w in pat.parts:
+                p1, r1 = self._pattern(part)
+                P += w * p1
+                rpP += w * r1
+        else:
+            raise L.LoadingError(f"unknown load pattern {pat!r}")
+        self.patterns[pat] = (P, rpP)
+        return P, rpP
+
+    # ------------------------------------------------------------------ controls
+    def _key(self, ctl):
+        if isinstance(ctl, (L.Displacement, L.Force, L.Indirect)):
+            t = ctl.target
+            if not isinstance(t, (L.RigidPoint, L.NodeSet)):
+                raise L.LoadingError(f"control {ctl.label}: target must be a RigidPoint or NodeSet")
+            return (type(ctl) is L.Force, id(t), L.dof_index(ctl.dof, isinstance(t, L.RigidPoint)))
+        return ("load", id(ctl.pattern))
+
+    def _apply(self, ctl, value):
+        """Impose one control value on the arrays (before relaxing an increment)."""
+        d = self.dyn
+        if isinstance(ctl, (L.Displacement, L.Indirect)):
+            k = L.dof_index(ctl.dof, isinstance(ctl.target, L.RigidPoint))
+            if isinstance(ctl.target, L.RigidPoint):
+                d.rpfree[ctl.target.index, k] = 0.0
+                d.rpU[ctl.target.index, k] = value
+                d.rpV[ctl.target.index, k] = 0.0
+            else:
+                nodes = ctl.target.nodes
+                if (d.tied[nodes] >= 0).any():
+                    raise L.LoadingError(f"control {ctl.label}: nodes are tied to a rigid point")
+                d.free[nodes, k] = 0.0
+                d.U[nodes, k] = value
+                d.V[nodes, k] = 0.0
+        elif isinstance(ctl, L.Force):
+            k = L.dof_index(ctl.dof)
+            if not isinstance(ctl.target, L.RigidPoint):
+                raise L.LoadingError(f"control {ctl.label}: Force acts on a RigidPoint; use Load with "
+                                     f"a PointLoad pattern for node sets")
+            d.rpfree[ctl.target.index, k] = 1.0
+            self.rp_force[ctl.target.index, k] = value
+        elif isinstance(ctl, L.Load):
+            self._pattern(ctl.pattern)
+            self.factors[ctl.pattern] = value
+
+    def _assemble_loads(self, indirect):
+        d = self.dyn
+        d.fext[:] = 0.0
+        d.P[:] = 0.0
+        d.rpP[:] = 0.0
+        rpf_loads = np.zeros_like(d.rpf)
+        for pat, fac in self.factors.items():
+            if indirect is not None and pat is indirect.pattern:
+                continue
+            P, rpP = self._pattern(pat)
+            d.fext[:] += fac * P
+            rpf_loads += fac * rpP
+        d.rpf[:] = self.rp_force * d.rpfree + rpf_loads
+        if indirect is not None:
+            P, rpP = self._pattern(indirect.pattern)
+            d.P[:] = P
+            d.rpP[:] = rpP
+
+    # ------------------------------------------------------------------ running
+    def run(self, stages):
+        """Run the stages; returns the history (dict of arrays). Raises SolverError on failure."""
+        if not self._built:
+            self._build()
+        for stage in stages:  # register every prescribed node set so history columns stay fixed
+            for ctl in stage.controls:
+                if isinstance(ctl, (L.Displacement, L.Indirect)) and isinstance(ctl.target, L.NodeSet):
+                    k = L.dof_index(ctl.dof, rotations=False)
+                    self.presc[(ctl.target.name, k)] = (ctl.target.nodes, k)
+        try:
+            from tqdm.auto import tqdm
+        except ImportError:  # pragma: no cover
+            tqdm = None
+        total = sum(s.increments for s in stages)
+        bar = tqdm(total=total, disable=not self.options.progress, unit="incr") if tqdm else None
+        try:
+            for stage in stages:
+                self._run_stage(stage, bar)
+        finally:
+            if bar is not None:
+                bar.close()
+            if self.writer is not None:
+                self.writer.flush()
+        return {k: np.asarray(v) for k, v in self.history.items()}
+
+    def close(self):
+        """Close the result file."""
+        if self.writer is not None:
+            self.writer.close()
+            self.writer = None
+
+    def _run_stage(self, stage, bar):
+        n = stage.increments
+        targets = {}
+        indirect = None
+        for ctl in stage.controls:
+            key = self._key(ctl)
+            start = self.values.get(key, 0.0)
+            targets[key] = (ctl, ctl.values(start, n))
+            if isinstance(ctl, L.Indirect):
+                indirect = ctl
+                if self.factors.get(ctl.pattern) is not None:
+                    self.lam[0] = self.factors[ctl.pattern]
+                self._pattern(ctl.pattern)
+        self.stage_name = stage.name
+        self.stage_indirect = indirect
+        for i in range(n):
+            goal = {key: vals[i] for key, (ctl, vals) in targets.items()}
+            self._increment(stage, targets, goal, indirect, depth=0)
+            if (i + 1) % stage.frames == 0 or i == n - 1:
+                self._write_frame()
+            if bar is not None:
+                bar.update(1)
+                bar.set_postfix_str(f"{stage.name} res={self.last_residual:.1e} "
+                                    f"it={self.last_iters}")
+        if indirect is not None:
+            # the pattern keeps its last factor; the control DOF is released
+            self.factors[indirect.pattern] = float(self.lam[0])
+            t = indirect.target
+            k = L.dof_index(indirect.dof, isinstance(t, L.RigidPoint))
+            if isinstance(t, L.RigidPoint):
+                self.dyn.rpfree[t.index, k] = 1.0
+            else:
+                self.dyn.free[t.nodes, k] = 1.0
+
+    def _snapshot(self):
+        d = self.dyn
+        return (d.U.copy(), d.V.copy(), d.rpU.copy(), d.rpV.copy(), d.free.copy(), d.rpfree.copy(),
+                self.rp_force.copy(), self.lam.copy(), dict(self.values), dict(self.factors))
+
+    def _restore(self, snap):
+        d = self.dyn
+        d.U[:], d.V[:], d.rpU[:], d.rpV[:], d.free[:], d.rpfree[:], self.rp_force[:] = snap[:7]
+        self.lam[:] = snap[7]
+        self.values = dict(snap[8])
+        self.factors = dict(snap[9])
+
+    def _increment(self, stage, targets, goal, indirect, depth):
+        o = self.options
+        d = self.dyn
+        snap = self._snapshot()
+        start = {key: self.values.get(key, 0.0) for key in goal}
+        for key, val in goal.items():
+            self._apply(targets[key][0], val)
+            self.values[key] = val
+        self._assemble_loads(indirect)
+        ctrl = np.zeros(3, dtype=np.int64)
+        pc = 1.0
+        if indirect is not None:
+            ctrl[:], pc = self._control_dof(indirect)
+        # predictor: continue the previous increment's motion when the control keeps its direction
+        dctl = sum(goal[k] - start[k] for k in goal)
+        u_before = snap[0]
+        if o.predictor and self.du_prev is not None and self.dctl_prev != 0.0 and dctl * self.dctl_prev > 0:
+            ratio = min(dctl / self.dctl_prev, 2.0)
+            d.U[:] += ratio * self.du_prev * d.free
+        info = np.zeros(R.N_INFO)
+        max_iter = stage.max_iter or o.max_iter
+        tol = stage.tol or o.tol
+        t0 = time.perf_counter()
+        R.relax(self.mesh, self.cont, d, self.lam, ctrl, pc, DAMPING[o.damping], o.alpha, tol,
+                self.ref_floor, max_iter, o.check_every, 0.5 * self.size, info)
+        elapsed = time.perf_counter() - t0
+        status = int(info[R.I_STATUS])
+        if status in (R.ST_NONFINITE, R.ST_RUNAWAY):
+            self._restore(snap)
+            node = int(info[R.I_WORST])
+            what = "non-finite force or displacement" if status == R.ST_NONFINITE else \
+                f"run-away displacement {info[R.I_QTY]:.3e} m (limit {0.5 * self.size:.3e} m)"
+            self._fail(f"increment {self.increment + 1} of stage {stage.name!r}: {what} at node "
+                       f"{node} (block {self.model.node_block[node]}) after {int(info[R.I_ITERS])} "
+                       f"iterations; the time step is unstable (safety factor {o.safety}) or the "
+                       f"structure lost equilibrium (collapse under load control)")
+        if status == R.ST_MAXITER:
+            self._restore(snap)
+            if depth >= o.max_cuts:
+                self._fail(f"increment {self.increment + 1} of stage {stage.name!r} did not converge "
+                           f"in {max_iter} iterations after {depth} cuts (residual ratio "
+                           f"{info[R.I_RESID]:.2e} > tol {tol:.1e})")
+            mid = {k: 0.5 * (start[k] + goal[k]) for k in goal}
+            self._increment(stage, targets, mid, indirect, depth + 1)
+            self._increment(stage, targets, goal, indirect, depth + 1)
+            return
+        self.du_prev = (d.U - u_before) * d.free
+        self.dctl_prev = dctl
+        self._commit(info, elapsed, stage, indirect)
+
+    def _control_dof(self, indirect):
+        """([kind, index, dof], pattern force on that DOF) of an indirect control."""
+        t = indirect.target
+        k = L.dof_index(indirect.dof, isinstance(t, L.RigidPoint))
+        P, rpP = self._pattern(indirect.pattern)
+        if isinstance(t, L.RigidPoint):
+            pc = rpP[t.index, k]
+            if k < 3:
+                pc += P[t.nodes, k].sum()
+            else:
+                arm = self.model.nodes[t.nodes] - t.position
+                pc += np.cross(arm, P[t.nodes])[:, k - 3].sum()
+            ctrl = (2, t.index, k)
+        else:
+            if t.nodes.size != 1:
+                raise L.LoadingError(f"control {indirect.label}: indirect control needs a single "
+                                     f"node or a rigid point, got {t.nodes.size} nodes")
+            pc = P[t.nodes[0], k]
+            ctrl = (1, t.nodes[0], k)
+        if abs(pc) < 1e-12 * max(np.abs(P).max(), np.abs(rpP).max(), 1e-300):
+            raise L.LoadingError(f"control {indirect.label}: the pattern {indirect.pattern.name!r} "
+                                 f"puts no force on the controlled DOF {indirect.dof}; control a DOF "
+                                 f"that the pattern loads (e.g. a rigid point of the loaded blocks)")
+        return ctrl, pc
+
+    def _fail(self, msg):
+        if self.writer is not None:
+            self.writer.flush()
+        raise SolverError(msg)
+
+    def _commit(self, info, elapsed, stage, indirect):
+        """Accept a converged increment: energies, reactions, history row, state commit."""
+        d = self.dyn
+        mesh, cont = self.mesh, self.cont
+        eint = R.internal_forces(mesh, cont, d)
+        rpres = np.zeros((d.rpX.shape[0], 6))
+        R.residual(d, self.lam[0], rpres)
+        lam = float(self.lam[0])
+        # external forces incl. reactions: applied loads on free DOFs, internal forces elsewhere
+        f_tot = np.where(d.free > 0, d.fext + lam * d.P, d.fint)
+        du = d.U - getattr(self, "_u_committed", np.zeros_like(d.U))
+        self.energy["W_ext"] += 0.5 * float(((f_tot + self.f_prev) * du).sum())
+        self.f_prev = f_tot
+        self._u_committed = d.U.copy()
+        mesh.s_old[:] = mesh.s_new
+        cont.s_old[:] = cont.s_new
+        self.energy["E_damped"] += info[R.I_DAMPED]
+        wd = mesh.wdet.sum(axis=1)
+        vol = mesh.wdet
+        d_blocks = float((mesh.s_old[:, :, MS_DISS] * vol).sum())
+        d_joints = float((cont.s_old[:, JS_DISS] * cont.area).sum()) if cont.slave.size else 0.0
+        w_ext = self.energy["W_ext"]
+        err = w_ext - eint - d_blocks - d_joints
+        self.increment += 1
+        row = {"increment": self.increment, "iterations": info[R.I_ITERS],
+               "residual": info[R.I_RESID], "time_s": elapsed, "lambda": lam,
+               "W_ext": w_ext, "E_stored": eint, "D_blocks": d_blocks, "D_joints": d_joints,
+               "E_damped": self.energy["E_damped"], "E_kinetic": info[R.I_KE],
+               "balance_error": err / max(abs(w_ext), 1e-300) if w_ext != 0 else 0.0,
+               "max_joint_damage": float(cont.s_old[:, JS_D].max()) if cont.slave.size else 0.0,
+               "max_dt": float(mesh.s_old[:, :, MS_DT].max()) if wd.size else 0.0,
+               "max_dc": float(mesh.s_old[:, :, MS_DC].max()) if wd.size else 0.0}
+        for rp in self.rigid_points:
+            for name, k in L.DOFS.items():
+                row[f"{rp.name}.u{name}"] = d.rpU[rp.index, k]
+                row[f"{rp.name}.f{name}"] = d.rpf[rp.index, k] + lam * d.rpP[rp.index, k] - rpres[rp.index, k]
+        for (name, k), (nodes, kk) in self.presc.items():
+            row[f"{name}.u{'xyz'[k]}"] = float(d.U[nodes, k].mean())
+            row[f"{name}.f{'xyz'[k]}"] = float((d.fint[nodes, k] - d.fext[nodes, k]).sum())
+        for key, v in row.items():
+            self.history.setdefault(key, [np.nan] * (self.increment - 1)).append(float(v))
+        self.last_residual = info[R.I_RESID]
+        self.last_iters = int(info[R.I_ITERS])
+        self.last_row = row
+        if self.writer is not None:
+            self.writer.append_history(row)
+
+    def fields(self):
+        """Current field values for a frame: U, dt, dc per element, D/opening/slip per contact."""
+        d, mesh, cont = self.dyn, self.mesh, self.cont
+        f = {"U": d.U.copy(),
+             "dt": mesh.s_old[:, :, MS_DT].max(axis=1), "dc": mesh.s_old[:, :, MS_DC].max(axis=1)}
+        if cont.slave.size:
+            f.update(D=cont.s_old[:, JS_D].copy(), opening=cont.gaps[:, 0].copy(),
+                     slip=np.hypot(cont.gaps[:, 1], cont.gaps[:, 2]), sigma=cont.trac[:, 0].copy(),
+                     tau=np.hypot(cont.trac[:, 1], cont.trac[:, 2]),
+                     slip_max=cont.s_old[:, JS_DMAX].copy())
+        return f
+
+    def _write_frame(self):
+        if self.writer is not None:
+            self.writer.write_frame(self.increment, self.fields(), {"stage": self.stage_name})
+
+
+def config_json(obj):
+    """JSON text of a configuration (dataclasses and arrays included) for the result file."""
+    def default(o):
+        if hasattr(o, "__dataclass_fields__"):
+            return asdict(o)
+        if isinstance(o, np.ndarray):
+            return o.tolist()
+        if isinstance(o, (np.integer, np.floating)):
+            return o.item()
+        return repr(o)
+    return json.dumps(obj, default=default)

@@ -1,0 +1,310 @@
+"""Dynamic relaxation: the whole iteration loop of one load increment in compiled code.
+
+Central differences with unit time step and fictitious masses (``minv`` = 1 / mass, chosen by the
+solver from Gershgorin bounds so that the step is stable). The loop computes internal forces of
+hexahedra and contact points, forms the out-of-balance force, applies the constraints (prescribed
+node DOFs, rigid reference points, indirect displacement control) and damps the motion until the
+out-of-balance force is small against the applied loads and reactions.
+
+Damping schemes (``DAMP_*``): kinetic damping (velocities zeroed at every peak of the kinetic
+energy), viscous damping with a Rayleigh-quotient estimate of the lowest active frequency
+(Underwood), and Cundall's local non-viscous damping (force reduced by ``alpha`` against the
+velocity sign; the masses are raised by 1 + alpha, which the stable step needs).
+
+Arrays are grouped in three named tuples built by ``dr_masonry.solver``:
+``mesh``: hexahedra (conn, active, dN, wdet, h, emat, mparams, s_old, s_new, fbuf, energy, ptr, rows);
+``cont``: contact points (slave, master, xi, area, law, lparams, gap0, s_old, s_new, gaps, trac,
+fbuf, psi, ptr, rows); ``dyn``: nodal and reference-point state (see ``SystemArrays`` in the solver).
+"""
+import numpy as np
+
+from .assembly import gather_add
+from .config import jit
+from .contact_forces import contact_forces
+from .hex8 import hex_forces
+
+DAMP_KINETIC = 0
+DAMP_VISCOUS = 1
+DAMP_LOCAL = 2
+
+# status codes returned in info[I_STATUS]
+ST_CONVERGED = 0
+ST_MAXITER = 1
+ST_NONFINITE = 2
+ST_RUNAWAY = 3
+
+# layout of the info vector
+I_ITERS = 0
+I_STATUS = 1
+I_RESID = 2      # ||r_free|| / reference force at exit
+I_KE = 3         # kinetic energy at exit (fictitious), J
+I_DAMPED = 4     # fictitious kinetic energy removed by the damping, J
+I_WORST = 5      # node (or -1 - reference point) where the guard fired
+I_QTY = 6        # the offending value
+I_REF = 7        # reference force norm, N
+I_EINT = 8       # stored energy (hexahedra + joints), J
+N_INFO = 9
+
+
+@jit
+def rotation_matrix(th, R):
+    """Rodrigues: rotation matrix ``R`` (3, 3) of the rotation vector ``th`` (3,), rad."""
+    a = np.sqrt(th[0] ** 2 + th[1] ** 2 + th[2] ** 2)
+    if a < 1e-300:
+        for i in range(3):
+            for j in range(3):
+                R[i, j] = 1.0 if i == j else 0.0
+        return
+    k0, k1, k2 = th[0] / a, th[1] / a, th[2] / a
+    c, s = np.cos(a), np.sin(a)
+    C = 1.0 - c
+    R[0, 0] = c + k0 * k0 * C
+    R[0, 1] = k0 * k1 * C - k2 * s
+    R[0, 2] = k0 * k2 * C + k1 * s
+    R[1, 0] = k1 * k0 * C + k2 * s
+    R[1, 1] = c + k1 * k1 * C
+    R[1, 2] = k1 * k2 * C - k0 * s
+    R[2, 0] = k2 * k0 * C - k1 * s
+    R[2, 1] = k2 * k1 * C + k0 * s
+    R[2, 2] = c + k2 * k2 * C
+
+
+@jit
+def place_rigid_nodes(dyn):
+    """Displacements of nodes tied to reference points from the points' 6 DOFs."""
+    R = np.empty((3, 3))
+    for p in range(dyn.rpX.shape[0]):
+        rotation_matrix(dyn.rpU[p, 3:], R)
+        for q in range(dyn.rpptr[p], dyn.rpptr[p + 1]):
+            i = dyn.rpnodes[q]
+            d0 = dyn.X[i, 0] - dyn.rpX[p, 0]
+            d1 = dyn.X[i, 1] - dyn.rpX[p, 1]
+            d2 = dyn.X[i, 2] - dyn.rpX[p, 2]
+            for k in range(3):
+                dyn.U[i, k] = (dyn.rpU[p, k] + R[k, 0] * d0 + R[k, 1] * d1 + R[k, 2] * d2
+                               - (d0 if k == 0 else (d1 if k == 1 else d2)))
+
+
+@jit
+def internal_forces(mesh, cont, dyn):
+    """Assemble internal forces into ``dyn.fint`` (n_nodes, 3), N; returns the stored energy, J."""
+    dyn.fint[:] = 0.0
+    e = 0.0
+    if mesh.active.shape[0] > 0:
+        hex_forces(dyn.U, mesh.conn, mesh.active, mesh.dN, mesh.wdet, mesh.h, mesh.emat,
+                   mesh.mparams, mesh.s_old, mesh.s_new, mesh.fbuf, mesh.energy)
+        gather_add(mesh.fbuf.reshape((-1, 3)), mesh.ptr, mesh.rows, dyn.fint)
+        for q in range(mesh.active.shape[0]):
+            e += mesh.energy[mesh.active[q]]
+    if cont.slave.shape[0] > 0:
+        x = dyn.X + dyn.U
+        contact_forces(x, cont.slave, cont.master, cont.xi, cont.area, cont.law, cont.lparams,
+                       cont.gap0, cont.s_old, cont.s_new, cont.gaps, cont.trac, cont.fbuf, cont.psi)
+        gather_add(cont.fbuf, cont.ptr, cont.rows, dyn.fint)
+        e += cont.psi.sum()
+    return e
+
+
+@jit
+def residual(dyn, lam, rpres):
+    """Out-of-balance forces ``dyn.res`` (n_nodes, 3) and generalised ones ``rpres`` (n_rp, 6)."""
+    n = dyn.U.shape[0]
+    for i in range(n):
+        for k in range(3):
+            dyn.res[i, k] = dyn.fext[i, k] + lam * dyn.P[i, k] - dyn.fint[i, k]
+    for p in range(dyn.rpX.shape[0]):
+        for k in range(6):
+            rpres[p, k] = dyn.rpf[p, k] + lam * dyn.rpP[p, k]
+        for q in range(dyn.rpptr[p], dyn.rpptr[p + 1]):
+            i = dyn.rpnodes[q]
+            a0 = dyn.X[i, 0] + dyn.U[i, 0] - dyn.rpX[p, 0] - dyn.rpU[p, 0]
+            a1 = dyn.X[i, 1] + dyn.U[i, 1] - dyn.rpX[p, 1] - dyn.rpU[p, 1]
+            a2 = dyn.X[i, 2] + dyn.U[i, 2] - dyn.rpX[p, 2] - dyn.rpU[p, 2]
+            r0, r1, r2 = dyn.res[i, 0], dyn.res[i, 1], dyn.res[i, 2]
+            rpres[p, 0] += r0
+            rpres[p, 1] += r1
+            rpres[p, 2] += r2
+            rpres[p, 3] += a1 * r2 - a2 * r1
+            rpres[p, 4] += a2 * r0 - a0 * r2
+            rpres[p, 5] += a0 * r1 - a1 * r0
+
+
+@jit
+def norms(dyn, lam, rpres):
+    """(free residual norm, reference norm) in N; moments are divided by the points' radii."""
+    rf = 0.0
+    ref = 0.0
+    for i in range(dyn.U.shape[0]):
+        for k in range(3):
+            f = dyn.fext[i, k] + lam * dyn.P[i, k]
+            if dyn.free[i, k] > 0.0:
+                rf += dyn.res[i, k] ** 2
+                ref += f * f
+            elif dyn.tied[i] < 0:  # support or prescribed DOF: its reaction counts as load
+                ref += f * f + dyn.res[i, k] ** 2
+    for p in range(dyn.rpX.shape[0]):
+        for k in range(6):
+            sc = 1.0 if k < 3 else 1.0 / dyn.rpradius[p]
+            f = (dyn.rpf[p, k] + lam * dyn.rpP[p, k]) * sc
+            if dyn.rpfree[p, k] > 0.0:
+                rf += (rpres[p, k] * sc) ** 2
+                ref += f * f
+            else:
+                ref += f * f + (rpres[p, k] * sc) ** 2
+    return np.sqrt(rf), np.sqrt(ref)
+
+
+@jit
+def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, tol, ref_floor, max_iter,
+          check_every, u_limit, info):
+    """Iterate one load increment to rest.
+
+    Parameters
+    ----------
+    lam_arr : (1,) float64
+        magnitude of the indirectly controlled load pattern (updated in place).
+    ctrl : (3,) int64
+        indirect control: [kind (0 none, 1 node DOF, 2 reference-point DOF), index, dof]; the
+        controlled DOF is held at its prescribed value and the pattern magnitude follows its
+        reaction.
+    ctrl_pc : float
+        the unit pattern's (generalised) force on the controlled DOF, N (for a reference point:
+        its own pattern load plus that of its tied nodes).
+    scheme : int
+        DAMP_* constant; ``alpha`` its parameter (local damping coefficient, or the viscous
+        damping scale).
+    tol : float
+        converged when ||r_free|| <= tol * max(reference, ref_floor).
+    u_limit : float
+        run-away guard: any displacement above it (m) stops the loop.
+    info : (N_INFO,) float64 written.
+    """
+    n = dyn.U.shape[0]
+    nr = dyn.rpX.shape[0]
+    rpres = np.zeros((nr, 6))
+    lam = lam_arr[0]
+    ke_prev = 0.0
+    damped = 0.0
+    status = ST_MAXITER
+    it = 0
+    rn = 0.0
+    ref = 0.0
+    ke = 0.0
+    eint = 0.0
+    worst = 0
+    qty = 0.0
+    # viscous damping: Rayleigh quotient with the previous internal force
+    fprev = dyn.fint.copy()
+    place_rigid_nodes(dyn)
+    for it in range(1, max_iter + 1):
+        eint = internal_forces(mesh, cont, dyn)
+        residual(dyn, lam, rpres)
+        # indirect displacement control: pattern magnitude follows the reaction of the held DOF
+        if ctrl[0] == 1:
+            lam -= dyn.res[ctrl[1], ctrl[2]] / ctrl_pc
+            residual(dyn, lam, rpres)
+        elif ctrl[0] == 2:
+            lam -= rpres[ctrl[1], ctrl[2]] / ctrl_pc
+            residual(dyn, lam, rpres)
+        if it % check_every == 0 or it == 1:
+            rn, ref = norms(dyn, lam, rpres)
+            if not (np.isfinite(rn) and np.isfinite(lam)):
+                status = ST_NONFINITE
+                for i in range(n):
+                    for k in range(3):
+                        if not np.isfinite(dyn.fint[i, k]) or not np.isfinite(dyn.U[i, k]):
+                            worst = i
+                            qty = dyn.fint[i, k]
+                            break
+                    if worst:
+                        break
+                break
+            if rn <= tol * max(ref, ref_floor) and it > 1:
+                status = ST_CONVERGED
+                break
+        # ---- velocity update ----------------------------------------------------------
+        c_visc = 0.0
+        if scheme == DAMP_VISCOUS:
+            num = 0.0
+            den = 0.0
+            for i in range(n):
+                for k in range(3):
+                    if dyn.free[i, k] > 0.0:
+                        du = dyn.V[i, k]
+                        num += du * (dyn.fint[i, k] - fprev[i, k])
+                        den += du * du / dyn.minv[i]
+            if den > 0.0 and num > 0.0:
+                c_visc = alpha * 2.0 * np.sqrt(num / den)
+            if c_visc > 1.9:
+                c_visc = 1.9
+            fprev[:] = dyn.fint
+        ke = 0.0
+        for i in range(n):
+            mi = 1.0 / dyn.minv[i]
+            for k in range(3):
+                if dyn.free[i, k] > 0.0:
+                    r = dyn.res[i, k]
+                    if scheme == DAMP_LOCAL:
+                        v = dyn.V[i, k]
+                        sg = 1.0 if v > 0.0 else (-1.0 if v < 0.0 else 0.0)
+                        r = r - alpha * abs(r) * sg
+                        dyn.V[i, k] = v + dyn.minv[i] * r / (1.0 + alpha)
+                    elif scheme == DAMP_VISCOUS:
+                        dyn.V[i, k] = ((2.0 - c_visc) * dyn.V[i, k] + 2.0 * dyn.minv[i] * r) / (2.0 + c_visc)
+                    else:
+                        dyn.V[i, k] += dyn.minv[i] * r
+                    ke += 0.5 * mi * dyn.V[i, k] ** 2
+        for p in range(nr):
+            for k in range(6):
+                if dyn.rpfree[p, k] > 0.0:
+                    r = rpres[p, k]
+                    if scheme == DAMP_VISCOUS:
+                        dyn.rpV[p, k] = ((2.0 - c_visc) * dyn.rpV[p, k] + 2.0 * dyn.rpminv[p, k] * r) / (2.0 + c_visc)
+                    else:
+                        if scheme == DAMP_LOCAL:
+                            v = dyn.rpV[p, k]
+                            sg = 1.0 if v > 0.0 else (-1.0 if v < 0.0 else 0.0)
+                            r = (r - alpha * abs(r) * sg) / (1.0 + alpha)
+                        dyn.rpV[p, k] += dyn.rpminv[p, k] * r
+                    ke += 0.5 * dyn.rpV[p, k] ** 2 / dyn.rpminv[p, k]
+        if scheme == DAMP_KINETIC:
+            if ke < ke_prev:
+                # kinetic-energy peak passed: stop every velocity
+                damped += ke
+                dyn.V[:] = 0.0
+                dyn.rpV[:] = 0.0
+                ke = 0.0
+            ke_prev = ke
+        # ---- displacement update ------------------------------------------------------
+        umax = 0.0
+        for i in range(n):
+            for k in range(3):
+                if dyn.free[i, k] > 0.0:
+                    dyn.U[i, k] += dyn.V[i, k]
+                    a = abs(dyn.U[i, k])
+                    if a > umax or not np.isfinite(a):
+                        umax = a
+                        worst = i
+        for p in range(nr):
+            for k in range(6):
+                if dyn.rpfree[p, k] > 0.0:
+                    dyn.rpU[p, k] += dyn.rpV[p, k]
+        place_rigid_nodes(dyn)
+        if not np.isfinite(umax):
+            status = ST_NONFINITE
+            qty = umax
+            break
+        if umax > u_limit:
+            status = ST_RUNAWAY
+            qty = umax
+            break
+    lam_arr[0] = lam
+    info[I_ITERS] = it
+    info[I_STATUS] = status
+    info[I_RESID] = rn / max(ref, ref_floor)
+    info[I_KE] = ke
+    info[I_DAMPED] = damped
+    info[I_WORST] = worst
+    info[I_QTY] = qty
+    info[I_REF] = ref
+    info[I_EINT] = eint
