@@ -15,8 +15,8 @@ sigma > 0 tension.
   tensile damage (staggered: D_t first, then D_s, then sigma with the final D).
 * Free energy ``psi = 0.5 (1-D) knn <u>^2 + 0.5 kc_pen <-u>^2 + 0.5 (1-D) kss |d|^2
   + 0.5 D kss |d - dp|^2``; dissipation rate ``Y dD + D tau_f . d(dp)`` with
-  ``Y = -dpsi/dD``, integrated by the midpoint rule between the committed and the new state
-  (Y at the mid gap and mid plastic slip, ``D_mid tau_f_mid . (dp_new - dp_old)``). This matches
+  ``Y = -dpsi/dD``, integrated by a midpoint-type rule between the committed and the new state
+  (Y from products of the old and new elastic gaps, ``D_mid tau_f_mid . (dp_new - dp_old)``). This matches
   the trapezoidal work of the tractions: exactly for sliding at constant D, to second order in the
   step otherwise. A single step much larger than the stick range ``2 mu<-sigma>/kss`` that
   reverses the slip or enters contact while sliding can give a negative increment; resolved
@@ -170,12 +170,13 @@ def joint_point(p, u, d1, d2, s_old, s_new, t):
     # dissipation, midpoint rule between the committed and the new state
     g1o = s_old[JS_G1]
     g2o = s_old[JS_G2]
-    um = max(0.5 * (s_old[JS_GU] + u), 0.0)
-    dm1 = 0.5 * (g1o + d1)
-    dm2 = 0.5 * (g2o + d2)
-    em1 = dm1 - 0.5 * (dp1o + dp1)
-    em2 = dm2 - 0.5 * (dp2o + dp2)
-    y = 0.5 * knn * um * um + 0.5 * kss * (dm1 * dm1 + dm2 * dm2 - em1 * em1 - em2 * em2)
+    # Y from products of the old and new gaps rather than squares of their mean: equally
+    # second-order, and exact for the secant branch D = 1 - u0 / u_max that dominates right
+    # after the peak (where the mean-square form overestimates the dissipation)
+    uo = max(s_old[JS_GU], 0.0)
+    un = max(u, 0.0)
+    y = 0.5 * knn * uo * un + 0.5 * kss * (g1o * d1 + g2o * d2 - (g1o - dp1o) * (d1 - dp1)
+                                          - (g2o - dp2o) * (d2 - dp2))
     tfm1 = 0.5 * (kss * (g1o - dp1o) + tf1)
     tfm2 = 0.5 * (kss * (g2o - dp2o) + tf2)
     s_new[JS_DISS] = (s_old[JS_DISS] + y * (dam - d_old)

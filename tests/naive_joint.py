@@ -82,11 +82,12 @@ def step(law, old, gap):
     tf = trial if size <= cap else (trial[0] * cap / size, trial[1] * cap / size)
     dp = (d1 - tf[0] / law.kss, d2 - tf[1] / law.kss)
     tau = tuple((1 - D) * law.kss * d + D * f for d, f in zip((d1, d2), tf))
-    # dissipation, midpoint rule
-    mid = [(a + b) / 2 for a, b in zip(old["gap"], (u, d1, d2))]
-    dpm = [(a + b) / 2 for a, b in zip(old["dp"], dp)]
-    Y = (0.5 * law.knn * max(mid[0], 0.0) ** 2
-         + 0.5 * law.kss * (mid[1] ** 2 + mid[2] ** 2 - (mid[1] - dpm[0]) ** 2 - (mid[2] - dpm[1]) ** 2))
+    # dissipation: Y from products of the old and new (elastic) gaps
+    go = old["gap"]
+    Y = (0.5 * law.knn * max(go[0], 0.0) * max(u, 0.0)
+         + 0.5 * law.kss * (go[1] * d1 + go[2] * d2
+                            - (go[1] - old["dp"][0]) * (d1 - dp[0])
+                            - (go[2] - old["dp"][1]) * (d2 - dp[1])))
     tf_old = [law.kss * (g - q) for g, q in zip(old["gap"][1:], old["dp"])]
     slide = sum((a + b) / 2 * (q1 - q0) for a, b, q1, q0 in zip(tf_old, tf, dp, old["dp"]))
     new.update(D=D, umax=umax, dmax=dmax, dp=dp,
