@@ -38,7 +38,8 @@ def build(params):
     div = (params["nx"], params["ny"], params["nz"])
     bottom = model.add_box((0, 0, 0), (L, T, H), brick, div)
     top = model.add_box((0, 0, H), (L, T, H), brick, div)
-    sim = Simulation(model, SolverOptions(tol=params["tol"], damping=params["damping"]),
+    sim = Simulation(model, SolverOptions(tol=params["tol"], damping=params["damping"],
+                                   progress=params.get("progress", False)),
                      output=params.get("h5"), config=params)
     base = model.block_nodes(bottom)
     sim.fix(base[np.isclose(model.nodes[base, 2], 0.0)])
@@ -70,6 +71,7 @@ def run(params):
 
 def main(argv=None):
     params = parse_overrides(PARAMS, sys.argv[1:] if argv is None else argv, __doc__)
+    params["progress"] = True
     params["h5"] = params["out"] + ".h5"
     sim, hist = run(params)
     u = hist["platen.uz"]

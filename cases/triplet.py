@@ -41,7 +41,8 @@ def build(params, sigma):
     brick = PlasticDamage.reference()
     div = (params["nx"], params["ny"], params["nz"])
     b = [model.add_box((0, 0, k * H), (L, T, H), brick, div) for k in range(3)]
-    sim = Simulation(model, SolverOptions(tol=params["tol"], damping=params["damping"]),
+    sim = Simulation(model, SolverOptions(tol=params["tol"], damping=params["damping"],
+                                   progress=params.get("progress", False)),
                      output=params.get("h5"), config=dict(params, sigma=sigma))
     base = plane_nodes(model, 2, 0.0, blocks=[b[0]])
     sim.fix(base, "z")
@@ -70,6 +71,7 @@ def run(params, sigma):
 
 def main(argv=None):
     params = parse_overrides(PARAMS, sys.argv[1:] if argv is None else argv, __doc__)
+    params["progress"] = True
     law = JointLaw.reference()
     for s in [float(v) * MPa for v in params["sigmas"].split(",")]:
         out = f"{params['out']}_{s / MPa:.1f}MPa"

@@ -36,7 +36,8 @@ def build(params):
     brick = BrickSpec(nx_along=params["nx"], ny_thick=params["ny"], nz_height=params["nz"])
     wall = add_wall(model, (0, 0, 0), 2 * brick.length, 5 * brick.height,
                     PlasticDamage.reference(), brick=brick)
-    sim = Simulation(model, SolverOptions(tol=params["tol"], damping=params["damping"]),
+    sim = Simulation(model, SolverOptions(tol=params["tol"], damping=params["damping"],
+                                   progress=params.get("progress", False)),
                      output=params.get("h5"), config=params)
     base = plane_nodes(model, 2, 0.0)
     sim.fix(base, "z")
@@ -58,6 +59,7 @@ def run(params):
 
 def main(argv=None):
     params = parse_overrides(PARAMS, sys.argv[1:] if argv is None else argv, __doc__)
+    params["progress"] = True
     params["h5"] = params["out"] + ".h5"
     sim, strain, stress = run(params)
     finish(sim, params["out"], x=strain * 1e3, y=stress / MPa, xlabel="strain (per mille)",

@@ -174,7 +174,7 @@ def terraced_house(model, params, material, beam_material, slab_material):
                       ("slab_material", slab_material)):
         _material(name, mat)
     p, lay = params, params.layout()
-    brick, h, t, L = p.brick, lay.course_height, p.brick.thickness, p.length
+    brick, t, L = p.brick, p.brick.thickness, p.length
     n_total = p.n_storeys * lay.n_storey
     in_band = [k % lay.n_storey >= lay.n_masonry for k in range(n_total)]
 

@@ -1,0 +1,192 @@
+"""S5 squat wall: in-plane cyclic shear-compression of a 4.00 x 2.75 m wall (paper COMP-6).
+
+A 4.00 m long x 2.75 m high (34 courses) x 0.102 m running-bond wall of 220 x 81 x 102 mm
+expanded bricks stands on a fixed foundation block; a stiff steel loading beam (elastic,
+E = 210 GPa) sits on its top course. All joints, including the wall-foundation and the wall-beam
+bed joints, follow the calibrated masonry joint law (the test specimen has mortar bed joints
+against both beams, so the beam may lift and slide like any bed joint; a tied joint would forbid
+the top-course decompression that the test shows). The beam's nodes are tied to a reference point
+at the centre of the wall's top face:
+
+* stage 1 ``precompression``: gravity and a constant vertical force, so that the top of the wall
+  carries 0.30 MPa x plan area (the beam's own weight is subtracted from the force); the beam's
+  x, y, rx, rz DOFs are held, ry is free (cantilever) or held (``bc=double_clamped``);
+* stage 2 ``push``: horizontal displacement of the beam, monotonic to 1.0 % drift
+  (``protocol=monotonic``) or the cyclic protocol 0.025 ... 0.75 % drift, two cycles each
+  (``protocol=cyclic``, :data:`dr_masonry.protocols.S5`).
+
+Output: base shear (the actuator force ``beam.fx``) against top displacement (``beam.ux``); the
+foundation's reactions are recorded as ``base.fx/fy/fz``. Reference (paper Figs. 15-17): shear
+failure with diagonal stair-stepped cracks through joints and blocks, peak base shear about
+equal in the cyclic and monotonic runs. ``variant=PAR_A..PAR_E`` are the sensitivity analyses of
+paper Fig. 18 (doubled ft and u_k; c and delta_k; tan(phi) and mu; block compressive strength and
+its fracture energy; all of these), ``shear_damage=paper`` the literal eq. (7) of the paper.
+
+Run: ``python cases/squat_wall.py [key=value ...]`` (or ``dr-masonry run squat_wall``). The
+default, coarse monotonic run (one hexahedron per brick, 60 increments to 1 % drift) takes a few
+minutes on 2 cores; ``mesh=fine`` (4 x 1 x 2 hexahedra per brick) is about ten times slower.
+``fast=true`` runs a 0.88 x 0.81 m coarse wall in a few increments (test suite).
+"""
+import sys
+
+import numpy as np
+
+from dr_masonry import (Displacement, Force, JointLaw, Load, Model, PlasticDamage, Simulation,
+                        SolverOptions, Stage)
+from dr_masonry.geometry import BrickSpec, add_beam, add_foundation, add_wall, plane_nodes
+from dr_masonry.loading import Gravity, LoadingError
+from dr_masonry.params import ParameterError, parse_overrides
+from dr_masonry.protocols import S5
+from dr_masonry.scene import finish
+from dr_masonry.units import MPa, kN, mm
+
+PARAMS = dict(
+    length=4.00,            # wall length, m
+    height=2.75,            # wall height, m (rounded to whole 81 mm courses)
+    sigma=0.30 * MPa,       # vertical pre-compression on the wall's top, Pa
+    bc="cantilever",        # cantilever (beam rotation free) | double_clamped (held)
+    protocol="monotonic",   # monotonic | cyclic
+    drift=S5.monotonic,     # monotonic target, % of the height
+    increments=60,          # increments of the monotonic push
+    step=0.5 * mm,          # cyclic: largest displacement per increment, m
+    pre_increments=4,       # increments of the pre-compression stage
+    mesh="coarse",          # coarse (1 x 1 x 1 hexahedra per brick) | fine (4 x 1 x 2)
+    shear_damage="calibrated",  # calibrated | paper (JointLaw.shear_damage)
+    variant="reference",    # reference | PAR_A | PAR_B | PAR_C | PAR_D | PAR_E
+    gravity=True,           # self-weight of wall and beam
+    beam_height=0.20,       # steel loading beam height, m
+    tol=1e-4,
+    damping="viscous",
+    frames=5,               # write a field frame every this many increments
+    fast=False,             # tiny 0.88 x 0.81 m coarse wall, few increments (tests)
+    out="results/squat_wall",
+)
+#: overrides of ``fast=true``: a 4 x 10 brick wall, a few increments (seconds)
+FAST = dict(length=0.88, height=0.81, mesh="coarse", increments=8, pre_increments=2,
+            step=1.0 * mm)
+
+STEEL = PlasticDamage.elastic(210e9, 0.3, 7850.0)       # loading beam
+CONCRETE = PlasticDamage.elastic(30e9, 0.2, 2400.0)     # foundation (fixed)
+MESHES = {"fine": BrickSpec(), "coarse": BrickSpec(nx_along=1, nz_height=1, ny_thick=1)}
+#: sensitivity variants (paper Fig. 18): which parameter pairs are doubled
+VARIANTS = {"reference": "", "PAR_A": "A", "PAR_B": "B", "PAR_C": "C", "PAR_D": "D",
+            "PAR_E": "ABCD"}
+
+
+def _choice(params, key, options):
+    if params[key] not in options:
+        raise ParameterError(f"parameter {key}={params[key]!r}: valid values are {list(options)}")
+    return params[key]
+
+
+def materials(variant="reference", shear_damage="calibrated"):
+    """(JointLaw, brick PlasticDamage) of a sensitivity variant (paper Fig. 18).
+
+    PAR_A doubles ft and u_k, PAR_B c and delta_k, PAR_C tan(phi) and mu, PAR_D the block's
+    compressive strength and fracture energy (the compression table's stresses x 2 at the same
+    inelastic strains, so its area doubles), PAR_E all of these.
+    """
+    if variant not in VARIANTS:
+        raise ParameterError(f"parameter variant={variant!r}: valid values are {list(VARIANTS)}")
+    law = JointLaw.reference(shear_damage=shear_damage)
+    block = PlasticDamage.reference()
+    which = VARIANTS[variant]
+    if "A" in which:
+        law = law.with_changes(ft=2 * law.ft, u_k=2 * law.u_k)
+    if "B" in which:
+        law = law.with_changes(c=2 * law.c, delta_k=2 * law.delta_k)
+    if "C" in which:
+        law = law.with_changes(tan_phi=2 * law.tan_phi, mu=2 * law.mu)
+    if "D" in which:
+        block = block.with_changes(compression=tuple((2 * s, e, d) for s, e, d in block.compression))
+    return law, block
+
+
+def build(params, protocol=S5):
+    """Model and stages of an in-plane wall test (S5 squat wall; S4 uses ``protocol=S4``).
+
+    Sets ``sim.wall`` (the :class:`~dr_masonry.geometry.Wall`), ``sim.beam`` (the loading beam's
+    reference point), ``sim.n_top`` (N, vertical force on the wall's top) and ``sim.weight_wall``
+    (N, the wall's self-weight, 0 without gravity).
+    """
+    if params.get("fast"):
+        params = dict(params, **FAST)
+    bc = _choice(params, "bc", ("cantilever", "double_clamped"))
+    kind = _choice(params, "protocol", ("monotonic", "cyclic"))
+    brick = MESHES[_choice(params, "mesh", tuple(MESHES))]
+    _choice(params, "shear_damage", ("calibrated", "paper"))
+    if not params["sigma"] >= 0:
+        raise ParameterError(f"parameter sigma={params['sigma']!r}: must be >= 0 Pa (compression)")
+    law, block = materials(params["variant"], params["shear_damage"])
+    model = Model()
+    model.set_joint_law(law)
+    courses = max(1, int(round(params["height"] / brick.height)))
+    wall = add_wall(model, (0, 0, 0), params["length"], courses * brick.height, block,
+                    brick=brick, fit="cut")
+    L, t, H = wall.length, wall.thickness, wall.height
+    esize = (brick.length / brick.nx_along, t / brick.ny_thick, brick.height / brick.nz_height)
+    fnd = add_foundation(model, (0, 0, -0.2), (L, t, 0.2), CONCRETE, element_size=esize)
+    hb = params["beam_height"]
+    beam_block = add_beam(model, (0, 0, H), (L, t, hb), STEEL, element_size=esize)
+    sim = Simulation(model, SolverOptions(tol=params["tol"], damping=params["damping"]),
+                     output=params.get("h5"), config=params)
+    beam = sim.rigid_point("beam", blocks=[beam_block], position=(0.5 * L, 0.5 * t, H))
+    base = sim.node_set("base", plane_nodes(model, 2, 0.0, blocks=[fnd]))
+    g = Gravity()
+    weight_beam = STEEL.density * L * t * hb * g.g if params["gravity"] else 0.0
+    sim.weight_wall = block.density * L * t * H * g.g if params["gravity"] else 0.0
+    sim.n_top = params["sigma"] * L * t
+    if sim.n_top < weight_beam:
+        raise ParameterError(f"parameter sigma={params['sigma']!r} Pa: the beam's weight alone "
+                             f"({weight_beam / (L * t):.4g} Pa) exceeds the pre-compression")
+    held = ("y", "rx", "rz") + (("ry",) if bc == "double_clamped" else ())
+    pre = [Force(target=beam, dof="z", to=-(sim.n_top - weight_beam), name="N"),
+           Displacement(target=beam, dof="x", to=0.0, name="push")]
+    pre += [Displacement(target=beam, dof=d, to=0.0) for d in held]
+    pre += [Displacement(target=base, dof=d, to=0.0) for d in "xyz"]
+    if params["gravity"]:
+        pre.append(Load(pattern=g, to=1.0))
+    if kind == "monotonic":
+        n = params["increments"]
+        path = protocol.monotonic_path(n, H) * params["drift"] / protocol.monotonic
+    else:
+        path = protocol.path(H, step=params["step"])
+    if path.size == 0:
+        raise LoadingError("empty displacement path")
+    stages = [Stage("precompression", params["pre_increments"], pre, frames=params["pre_increments"]),
+              Stage("push", path.size, [Displacement(target=beam, dof="x", path=path, name="push")],
+                    frames=params["frames"])]
+    sim.wall, sim.beam = wall, beam
+    return sim, stages
+
+
+def run(params, protocol=S5):
+    """Run; returns (simulation, history, push-stage mask (bool array))."""
+    sim, stages = build(params, protocol)
+    hist = sim.run(stages)
+    return sim, hist, hist["increment"] > stages[0].increments
+
+
+def report(sim, hist, push):
+    """One-line summary: peak base shear, its displacement, damage, iterations per increment."""
+    V, u = hist["beam.fx"][push], hist["beam.ux"][push]
+    k = int(np.argmax(np.abs(V)))
+    return (f"peak base shear {V[k] / kN:.2f} kN at top displacement {u[k] / mm:.2f} mm; "
+            f"max joint damage {hist['max_joint_damage'][-1]:.2f}, block dt "
+            f"{hist['max_dt'][-1]:.2f}, dc {hist['max_dc'][-1]:.2f}; iterations per increment "
+            f"{np.mean(hist['iterations'][push]):.0f} (max {np.max(hist['iterations'][push]):.0f}); "
+            f"relaxation time {np.sum(hist['time_s']):.1f} s")
+
+
+def main(argv=None, doc=__doc__, defaults=PARAMS, protocol=S5, title="S5 squat wall"):
+    params = parse_overrides(defaults, sys.argv[1:] if argv is None else argv, doc)
+    params["h5"] = params["out"] + ".h5"
+    sim, hist, push = run(params, protocol)
+    finish(sim, params["out"], x=hist["beam.ux"][push] / mm, y=hist["beam.fx"][push] / kN,
+           xlabel="top displacement (mm)", ylabel="base shear (kN)",
+           title=f"{title}, {params['protocol']}, {params['bc']}, {params['variant']}")
+    print(report(sim, hist, push))
+
+
+if __name__ == "__main__":
+    main()
