@@ -93,6 +93,14 @@ class PointLoad:
 
 
 @dataclass(eq=False)
+class StoredPattern:
+    """A pattern restored from a checkpoint: its nodal vectors as they were assembled."""
+    name: str
+    P: np.ndarray
+    rpP: np.ndarray
+
+
+@dataclass(eq=False)
 class Combined:
     """Several patterns summed with weights: ``Combined([(pattern, weight), ...])``."""
     parts: list

@@ -255,6 +255,22 @@ class ResultWriter:
             h[k].resize((keep,))
         self.flush()
 
+    def write_checkpoint(self, increment, arrays, meta):
+        """Replace ``/checkpoint`` by the solver state after ``increment`` (restart data).
+
+        ``arrays``: name -> ndarray (any shape); ``meta``: JSON-serialisable dict.
+        """
+        f = self._f
+        if "checkpoint" in f:
+            del f["checkpoint"]
+        g = f.create_group("checkpoint")
+        g.attrs["increment"] = int(increment)
+        g.attrs["history_rows"] = self.n_history
+        g.attrs["meta"] = _json(meta)
+        for name, arr in arrays.items():
+            g.create_dataset(name, data=np.asarray(arr))
+        self.flush()
+
     def flush(self):
         """Write everything to disk."""
         self._f.flush()
@@ -405,6 +421,17 @@ class Result:
             raise ResultsError(f"frame index {i!r} out of range: {self.path} has "
                                f"{self.n_frames} frames") from None
         return f["frames"][_frame_name(inc)]
+
+    def checkpoint(self):
+        """(increment, arrays dict, meta dict) of the last checkpoint; ResultsError if none."""
+        with h5py.File(self.path, "r") as f:
+            if "checkpoint" not in f:
+                raise ResultsError(f"{self.path} has no checkpoint (written with every frame)")
+            g = f["checkpoint"]
+            arrays = {}
+            g.visititems(lambda k, v: arrays.__setitem__(k, v[()])
+                         if isinstance(v, h5py.Dataset) else None)
+            return int(g.attrs["increment"]), arrays, json.loads(g.attrs["meta"])
 
     def frame(self, i):
         """Fields of frame ``i`` (position in :attr:`frame_ids`, negative counts from the end)."""

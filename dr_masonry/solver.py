@@ -105,18 +105,25 @@ class Simulation:
         fixed_blocks = np.nonzero(model.block_fixed)[0]
         self._fixed[model.block_nodes(fixed_blocks)] = True
         self._built = False
+        self._resuming = False
         self.history = {}
         self.increment = 0
 
     # ------------------------------------------------------------------ set-up API
     def node_set(self, name, nodes):
         """Register a named node set (int array of node ids)."""
+        self._check_name(name)
         nodes = np.unique(np.asarray(nodes, dtype=np.int64))
         if nodes.size == 0 or nodes.min() < 0 or nodes.max() >= self.model.n_nodes:
             raise L.LoadingError(f"node set {name!r}: node ids must be in [0, {self.model.n_nodes})")
         ns = L.NodeSet(name, nodes)
         self.node_sets[name] = ns
         return ns
+
+    def _check_name(self, name):
+        if name in self.node_sets or any(rp.name == name for rp in self.rigid_points):
+            raise L.LoadingError(f"a node set or rigid point named {name!r} exists already; names "
+                                 f"identify controls in the history and on restart")
 
     def fix(self, nodes, dofs="xyz"):
         """Clamp DOFs (any of 'x', 'y', 'z') of the given nodes (supports, symmetry planes)."""
@@ -131,6 +138,7 @@ class Simulation:
         """
         if self._built:
             raise L.LoadingError("rigid points must be created before the first run")
+        self._check_name(name)
         if nodes is None:
             if blocks is None:
                 raise L.LoadingError(f"rigid point {name!r}: give blocks or nodes")
@@ -224,26 +232,36 @@ class Simulation:
         self.lam = np.zeros(1)
         self.rp_force = np.zeros((nr, 6))  # Force-control values on reference-point DOFs
         self.values = {}       # control key -> current value
-        self.factors = {}      # pattern -> current factor (load-controlled)
-        self.patterns = {}     # pattern -> (P (n,3), rpP (nr,6))
+        self.factors = {}      # pattern name -> current factor (load-controlled)
+        self.patterns = {}     # pattern name -> (pattern, P (n,3), rpP (nr,6))
         self.presc = {}        # (node set name, dof) -> (nodes, dof)
         self.energy = dict(W_ext=0.0, E_damped=0.0)
         self.f_prev = np.zeros((n, 3))
         self.du_prev = None
         self.dctl_prev = 0.0
         self.writer = None
+        self._u_committed = np.zeros((n, 3))
         if self.output is not None:
             import os
             from .results import ResultWriter
             os.makedirs(os.path.dirname(os.path.abspath(self.output)), exist_ok=True)
             cfg = dict(self.config, solver=asdict(self.options))
-            self.writer = ResultWriter(self.output, m, cfg)
+            self.writer = ResultWriter(self.output, m, cfg, mode="a" if self._resuming else "w")
         self._built = True
+        if self._resuming:
+            self._load_checkpoint()
 
     # ------------------------------------------------------------------ patterns
     def _pattern(self, pat):
-        if pat in self.patterns:
-            return self.patterns[pat]
+        """(P (n_nodes, 3) N, rpP (n_rp, 6)) of a load pattern per unit factor, cached by name."""
+        known = self.patterns.get(pat.name)
+        if known is not None:
+            if known[0] is pat or isinstance(known[0], L.StoredPattern):
+                if known[0] is not pat:  # a pattern restored from a checkpoint, named again
+                    self.patterns[pat.name] = (pat,) + known[1:]
+                return known[1:]
+            raise L.LoadingError(f"two different load patterns are named {pat.name!r}; give each "
+                                 f"pattern a distinct name")
         m = self.model
         n = m.n_nodes
         P = np.zeros((n, 3))
@@ -273,7 +291,7 @@ class Simulation:
                 rpP += w * r1
         else:
             raise L.LoadingError(f"unknown load pattern {pat!r}")
-        self.patterns[pat] = (P, rpP)
+        self.patterns[pat.name] = (pat, P, rpP)
         return P, rpP
 
     # ------------------------------------------------------------------ controls
@@ -282,8 +300,9 @@ class Simulation:
             t = ctl.target
             if not isinstance(t, (L.RigidPoint, L.NodeSet)):
                 raise L.LoadingError(f"control {ctl.label}: target must be a RigidPoint or NodeSet")
-            return (type(ctl) is L.Force, id(t), L.dof_index(ctl.dof, isinstance(t, L.RigidPoint)))
-        return ("load", id(ctl.pattern))
+            return (type(ctl).__name__ == "Force", t.name,
+                    L.dof_index(ctl.dof, isinstance(t, L.RigidPoint)))
+        return ("load", ctl.pattern.name)
 
     def _apply(self, ctl, value):
         """Impose one control value on the arrays (before relaxing an increment)."""
@@ -310,7 +329,7 @@ class Simulation:
             self.rp_force[ctl.target.index, k] = value
         elif isinstance(ctl, L.Load):
             self._pattern(ctl.pattern)
-            self.factors[ctl.pattern] = value
+            self.factors[ctl.pattern.name] = value
 
     def _assemble_loads(self, indirect):
         d = self.dyn
@@ -318,10 +337,10 @@ class Simulation:
         d.P[:] = 0.0
         d.rpP[:] = 0.0
         rpf_loads = np.zeros_like(d.rpf)
-        for pat, fac in self.factors.items():
-            if indirect is not None and pat is indirect.pattern:
+        for name, fac in self.factors.items():
+            if indirect is not None and name == indirect.pattern.name:
                 continue
-            P, rpP = self._pattern(pat)
+            P, rpP = self.patterns[name][1:]
             d.fext[:] += fac * P
             rpf_loads += fac * rpP
         d.rpf[:] = self.rp_force * d.rpfree + rpf_loads
@@ -372,8 +391,8 @@ class Simulation:
             targets[key] = (ctl, ctl.values(start, n))
             if isinstance(ctl, L.Indirect):
                 indirect = ctl
-                if self.factors.get(ctl.pattern) is not None:
-                    self.lam[0] = self.factors[ctl.pattern]
+                if self.factors.get(ctl.pattern.name) is not None:
+                    self.lam[0] = self.factors[ctl.pattern.name]
                 self._pattern(ctl.pattern)
         self.stage_name = stage.name
         self.stage_indirect = indirect
@@ -388,7 +407,7 @@ class Simulation:
                                     f"it={self.last_iters}")
         if indirect is not None:
             # the pattern keeps its last factor; the control DOF is released
-            self.factors[indirect.pattern] = float(self.lam[0])
+            self.factors[indirect.pattern.name] = float(self.lam[0])
             t = indirect.target
             k = L.dof_index(indirect.dof, isinstance(t, L.RigidPoint))
             if isinstance(t, L.RigidPoint):
@@ -498,7 +517,7 @@ class Simulation:
         lam = float(self.lam[0])
         # external forces incl. reactions: applied loads on free DOFs, internal forces elsewhere
         f_tot = np.where(d.free > 0, d.fext + lam * d.P, d.fint)
-        du = d.U - getattr(self, "_u_committed", np.zeros_like(d.U))
+        du = d.U - self._u_committed
         self.energy["W_ext"] += 0.5 * float(((f_tot + self.f_prev) * du).sum())
         self.f_prev = f_tot
         self._u_committed = d.U.copy()
@@ -550,6 +569,69 @@ class Simulation:
     def _write_frame(self):
         if self.writer is not None:
             self.writer.write_frame(self.increment, self.fields(), {"stage": self.stage_name})
+            self._write_checkpoint()
+
+    # ------------------------------------------------------------------ restart
+    _STATE = ("U", "V", "free", "rpU", "rpV", "rpfree")
+
+    def _write_checkpoint(self):
+        """Store everything a continued run needs (overwritten at every frame)."""
+        d = self.dyn
+        arrays = {k: getattr(d, k) for k in self._STATE}
+        arrays.update(rp_force=self.rp_force, lam=self.lam, f_prev=self.f_prev,
+                      s_blocks=self.mesh.s_old, s_joints=self.cont.s_old,
+                      du_prev=self.du_prev if self.du_prev is not None else np.zeros(0))
+        meta = {"values": [[list(k), v] for k, v in self.values.items()],
+                "factors": self.factors, "energy": self.energy, "dctl_prev": self.dctl_prev,
+                "history": {k: v for k, v in self.history.items()}, "patterns": []}
+        for name, (pat, P, rpP) in self.patterns.items():
+            arrays[f"pattern_P/{name}"] = P
+            arrays[f"pattern_rpP/{name}"] = rpP
+            meta["patterns"].append(name)
+        self.writer.write_checkpoint(self.increment, arrays, meta)
+
+    def resume(self, path):
+        """Continue the run stored in ``path`` from its last checkpoint (the last frame).
+
+        The simulation must be set up as the original one (same model, supports and reference
+        points, e.g. from the scene's ``build``); later rows and frames of the file are dropped and
+        the next :meth:`run` appends to it. Stages passed to ``run`` continue from the restored
+        state: controls keep their values, patterns their factors.
+        """
+        if self._built:
+            raise L.LoadingError("resume() must be called before the first run")
+        self.output = path
+        self._resuming = True
+        self._build()
+
+    def _load_checkpoint(self):
+        from .results import open_result
+        inc, arrays, meta = open_result(self.output).checkpoint()
+        d = self.dyn
+        for k in self._STATE:
+            if arrays[k].shape != getattr(d, k).shape:
+                raise L.LoadingError(f"checkpoint of {self.output}: {k} has shape {arrays[k].shape}, "
+                                     f"this model needs {getattr(d, k).shape} (not the same model)")
+            getattr(d, k)[:] = arrays[k]
+        self.rp_force[:] = arrays["rp_force"]
+        self.lam[:] = arrays["lam"]
+        self.f_prev = arrays["f_prev"]
+        self._u_committed = d.U.copy()
+        self.mesh.s_old[:] = arrays["s_blocks"]
+        self.mesh.s_new[:] = arrays["s_blocks"]
+        self.cont.s_old[:] = arrays["s_joints"]
+        self.cont.s_new[:] = arrays["s_joints"]
+        self.du_prev = arrays["du_prev"] if arrays["du_prev"].size else None
+        self.values = {tuple(k): v for k, v in meta["values"]}
+        self.factors = dict(meta["factors"])
+        self.energy = dict(meta["energy"])
+        self.dctl_prev = meta["dctl_prev"]
+        self.history = {k: list(v) for k, v in meta["history"].items()}
+        for name in meta["patterns"]:
+            stored = L.StoredPattern(name, arrays[f"pattern_P/{name}"], arrays[f"pattern_rpP/{name}"])
+            self.patterns[name] = (stored, stored.P, stored.rpP)
+        self.increment = inc
+        self.writer.truncate(inc)
 
 
 def config_json(obj):

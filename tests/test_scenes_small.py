@@ -105,3 +105,29 @@ def test_non_finite_state_is_caught(tmp_path):
     sim.dyn.U[7, 0] = np.nan
     with pytest.raises(SolverError, match=r"non-finite .* at node \d+ \(block \d\)"):
         sim.run(stages)
+
+
+def test_restart_continues_a_run(tmp_path):
+    """A run stopped after stage 1 and resumed from its file ends where an uninterrupted run ends."""
+    couplet = load_case("couplet")
+    params = dict(couplet.PARAMS, increments=40)
+    sim, stages = couplet.build(dict(params, h5=None))
+    whole = sim.run(stages)
+    # the same path in two stages, the second after a restart from the file
+    path = str(tmp_path / "r.h5")
+    sim1, (stage,) = couplet.build(dict(params, h5=path))
+    pull = stage.controls[-1]
+    first = type(stage)("first", 15, stage.controls[:-1] + [type(pull)(
+        target=pull.target, dof="z", path=pull.path[:15], name="pull")])
+    sim1.run([first])
+    sim1.close()
+    sim2, (stage,) = couplet.build(dict(params, h5=None))
+    sim2.resume(path)
+    rest = type(stage)("rest", 25, [type(pull)(target=sim2.rigid_points[0], dof="z",
+                                               path=pull.path[15:], name="pull")])
+    hist = sim2.run([rest])
+    sim2.close()
+    assert len(hist["platen.fz"]) == 40
+    assert np.allclose(hist["platen.fz"], whole["platen.fz"], rtol=1e-6, atol=1e-6)
+    from dr_masonry.results import open_result
+    assert open_result(path).n_history == 40
