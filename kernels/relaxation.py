@@ -38,7 +38,7 @@ I_ITERS = 0
 I_STATUS = 1
 I_RESID = 2      # ||r_free|| / reference force at exit
 I_KE = 3         # kinetic energy at exit (fictitious), J
-I_DAMPED = 4     # fictitious kinetic energy removed by the damping, J
+I_DAMPED = 4     # energy removed by the damping (node DOFs; kinetic: KE at resets), J
 I_WORST = 5      # node (or -1 - reference point) where the guard fired
 I_QTY = 6        # the offending value
 I_REF = 7        # reference force norm, N
@@ -244,13 +244,14 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, tol, ref_floor
             for k in range(3):
                 if dyn.free[i, k] > 0.0:
                     r = dyn.res[i, k]
+                    v = dyn.V[i, k]
                     if scheme == DAMP_LOCAL:
-                        v = dyn.V[i, k]
                         sg = 1.0 if v > 0.0 else (-1.0 if v < 0.0 else 0.0)
-                        r = r - alpha * abs(r) * sg
-                        dyn.V[i, k] = v + dyn.minv[i] * r / (1.0 + alpha)
+                        dyn.V[i, k] = v + dyn.minv[i] * (r - alpha * abs(r) * sg) / (1.0 + alpha)
+                        damped += alpha * abs(r) * 0.5 * abs(v + dyn.V[i, k])
                     elif scheme == DAMP_VISCOUS:
-                        dyn.V[i, k] = ((2.0 - c_visc) * dyn.V[i, k] + 2.0 * dyn.minv[i] * r) / (2.0 + c_visc)
+                        dyn.V[i, k] = ((2.0 - c_visc) * v + 2.0 * dyn.minv[i] * r) / (2.0 + c_visc)
+                        damped += c_visc * mi * (0.5 * (v + dyn.V[i, k])) ** 2
                     else:
                         dyn.V[i, k] += dyn.minv[i] * r
                     ke += 0.5 * mi * dyn.V[i, k] ** 2

@@ -131,3 +131,12 @@ def test_restart_continues_a_run(tmp_path):
     assert np.allclose(hist["platen.fz"], whole["platen.fz"], rtol=1e-6, atol=1e-6)
     from dr_masonry.results import open_result
     assert open_result(path).n_history == 40
+
+
+def test_energy_warning_when_balance_fails(monkeypatch):
+    """The audit says so when the balance error leaves its bound (forced by a tiny bound)."""
+    couplet = load_case("couplet")
+    sim, stages = couplet.build(dict(couplet.PARAMS, increments=20, h5=None))
+    sim.options.energy_tol = 1e-9
+    with pytest.warns(RuntimeWarning, match="energy balance error"):
+        sim.run(stages)
