@@ -157,7 +157,8 @@ class Simulation:
         return rp
 
     # ------------------------------------------------------------------ arrays
-    def _build(self):
+    def build(self):
+        """Build the arrays (done by the first :meth:`run`; call it to inspect them first)."""
         m = self.model
         o = self.options
         X = m.nodes
@@ -357,7 +358,7 @@ class Simulation:
     def run(self, stages):
         """Run the stages; returns the history (dict of arrays). Raises SolverError on failure."""
         if not self._built:
-            self._build()
+            self.build()
         for stage in stages:  # register every prescribed node set so history columns stay fixed
             for ctl in stage.controls:
                 if isinstance(ctl, (L.Displacement, L.Indirect)) and isinstance(ctl.target, L.NodeSet):
@@ -500,7 +501,7 @@ class Simulation:
                                      f"node or a rigid point, got {t.nodes.size} nodes")
             pc = P[t.nodes[0], k]
             ctrl = (1, t.nodes[0], k)
-        if abs(pc) < 1e-12 * max(np.abs(P).max(), np.abs(rpP).max(), 1e-300):
+        if abs(pc) < 1e-12 * max(np.max(np.abs(P), initial=0.0), np.max(np.abs(rpP), initial=0.0), 1e-300):
             raise L.LoadingError(f"control {indirect.label}: the pattern {indirect.pattern.name!r} "
                                  f"puts no force on the controlled DOF {indirect.dof}; control a DOF "
                                  f"that the pattern loads (e.g. a rigid point of the loaded blocks)")
@@ -625,7 +626,7 @@ class Simulation:
             raise L.LoadingError("resume() must be called before the first run")
         self.output = path
         self._resuming = True
-        self._build()
+        self.build()
 
     def _load_checkpoint(self):
         from .results import open_result

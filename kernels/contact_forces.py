@@ -10,6 +10,8 @@ from .config import jit, pjit, prange
 from .contact_frame import contact_frame
 from .joint_law import JS_D, JS_DP1, JS_DP2, P_KC, P_KNN, P_KSS, joint_point
 
+_CHUNK = 64  # contact points per parallel task (scratch arrays are allocated once per task)
+
 
 @jit
 def joint_energy(p, gap, s):
@@ -42,38 +44,49 @@ def contact_forces(x, slave, master, xi, area, law, lparams, gap0, s_old, s_new,
     fbuf : (nc * 5, 3) written: internal force on the slave (row 5c) and masters (5c + 1..4), N.
     psi : (nc,) written: stored energy of each point, J.
     """
-    for c in prange(slave.shape[0]):
-        xq = np.empty((4, 3))
-        for a in range(4):
-            for k in range(3):
-                xq[a, k] = x[master[c, a], k]
-        r = xi[c, 0]
-        s = xi[c, 1]
+    nc = slave.shape[0]
+    nchunk = (nc + _CHUNK - 1) // _CHUNK
+    for ch in prange(nchunk):
+        xq = np.empty((4, 3))  # scratch, once per chunk of points
         xm = np.empty(3)
         frame = np.empty((3, 3))
-        contact_frame(xq, r, s, xm, frame)
         g = np.empty(3)
-        for a in range(3):
-            g[a] = ((x[slave[c], 0] - xm[0]) * frame[a, 0] + (x[slave[c], 1] - xm[1]) * frame[a, 1]
-                    + (x[slave[c], 2] - xm[2]) * frame[a, 2]) - gap0[c, a]
-            gaps[c, a] = g[a]
         t = np.empty(3)
-        p = lparams[law[c]]
-        joint_point(p, g[0], g[1], g[2], s_old[c], s_new[c], t)
-        for a in range(3):
-            trac[c, a] = t[a]
-        psi[c] = area[c] * joint_energy(p, g, s_new[c])
-        n0 = 0.25 * (1.0 - r) * (1.0 - s)
-        n1 = 0.25 * (1.0 + r) * (1.0 - s)
-        n2 = 0.25 * (1.0 + r) * (1.0 + s)
-        n3 = 0.25 * (1.0 - r) * (1.0 + s)
+        for c in range(ch * _CHUNK, min(nc, (ch + 1) * _CHUNK)):
+            _one_contact(c, x, slave, master, xi, area, law, lparams, gap0, s_old, s_new, gaps,
+                         trac, fbuf, psi, xq, xm, frame, g, t)
+
+
+@jit
+def _one_contact(c, x, slave, master, xi, area, law, lparams, gap0, s_old, s_new, gaps, trac,
+                 fbuf, psi, xq, xm, frame, g, t):
+    """Contact point ``c`` of :func:`contact_forces`, with caller-provided scratch arrays."""
+    for a in range(4):
         for k in range(3):
-            f = area[c] * (t[0] * frame[0, k] + t[1] * frame[1, k] + t[2] * frame[2, k])
-            fbuf[5 * c, k] = f
-            fbuf[5 * c + 1, k] = -n0 * f
-            fbuf[5 * c + 2, k] = -n1 * f
-            fbuf[5 * c + 3, k] = -n2 * f
-            fbuf[5 * c + 4, k] = -n3 * f
+            xq[a, k] = x[master[c, a], k]
+    r = xi[c, 0]
+    s = xi[c, 1]
+    contact_frame(xq, r, s, xm, frame)
+    for a in range(3):
+        g[a] = ((x[slave[c], 0] - xm[0]) * frame[a, 0] + (x[slave[c], 1] - xm[1]) * frame[a, 1]
+                + (x[slave[c], 2] - xm[2]) * frame[a, 2]) - gap0[c, a]
+        gaps[c, a] = g[a]
+    p = lparams[law[c]]
+    joint_point(p, g[0], g[1], g[2], s_old[c], s_new[c], t)
+    for a in range(3):
+        trac[c, a] = t[a]
+    psi[c] = area[c] * joint_energy(p, g, s_new[c])
+    n0 = 0.25 * (1.0 - r) * (1.0 - s)
+    n1 = 0.25 * (1.0 + r) * (1.0 - s)
+    n2 = 0.25 * (1.0 + r) * (1.0 + s)
+    n3 = 0.25 * (1.0 - r) * (1.0 + s)
+    for k in range(3):
+        f = area[c] * (t[0] * frame[0, k] + t[1] * frame[1, k] + t[2] * frame[2, k])
+        fbuf[5 * c, k] = f
+        fbuf[5 * c + 1, k] = -n0 * f
+        fbuf[5 * c + 2, k] = -n1 * f
+        fbuf[5 * c + 3, k] = -n2 * f
+        fbuf[5 * c + 4, k] = -n3 * f
 
 
 def contact_rowsum(slave, master, xi, area, kbound, n_nodes):

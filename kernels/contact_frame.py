@@ -26,23 +26,29 @@ def contact_frame(xq, r, s, xm, frame):
 
     Returns the area Jacobian |a1 x a2| (m^2 per unit natural area).
     """
-    a1 = np.empty(3)
-    a2 = np.empty(3)
+    a10 = a11 = a12 = a20 = a21 = a22 = 0.0  # scalars: no allocation in the hot loop
     for k in range(3):
         xm[k] = 0.25 * ((1.0 - r) * (1.0 - s) * xq[0, k] + (1.0 + r) * (1.0 - s) * xq[1, k]
                         + (1.0 + r) * (1.0 + s) * xq[2, k] + (1.0 - r) * (1.0 + s) * xq[3, k])
-        a1[k] = 0.25 * ((1.0 - s) * (xq[1, k] - xq[0, k]) + (1.0 + s) * (xq[2, k] - xq[3, k]))
-        a2[k] = 0.25 * ((1.0 - r) * (xq[3, k] - xq[0, k]) + (1.0 + r) * (xq[2, k] - xq[1, k]))
-    nx = a1[1] * a2[2] - a1[2] * a2[1]
-    ny = a1[2] * a2[0] - a1[0] * a2[2]
-    nz = a1[0] * a2[1] - a1[1] * a2[0]
+        b1 = 0.25 * ((1.0 - s) * (xq[1, k] - xq[0, k]) + (1.0 + s) * (xq[2, k] - xq[3, k]))
+        b2 = 0.25 * ((1.0 - r) * (xq[3, k] - xq[0, k]) + (1.0 + r) * (xq[2, k] - xq[1, k]))
+        if k == 0:
+            a10, a20 = b1, b2
+        elif k == 1:
+            a11, a21 = b1, b2
+        else:
+            a12, a22 = b1, b2
+    nx = a11 * a22 - a12 * a21
+    ny = a12 * a20 - a10 * a22
+    nz = a10 * a21 - a11 * a20
     jac = np.sqrt(nx * nx + ny * ny + nz * nz)
-    la1 = np.sqrt(a1[0] ** 2 + a1[1] ** 2 + a1[2] ** 2)
+    la1 = np.sqrt(a10 * a10 + a11 * a11 + a12 * a12)
     frame[0, 0] = nx / jac
     frame[0, 1] = ny / jac
     frame[0, 2] = nz / jac
-    for k in range(3):
-        frame[1, k] = a1[k] / la1
+    frame[1, 0] = a10 / la1
+    frame[1, 1] = a11 / la1
+    frame[1, 2] = a12 / la1
     frame[2, 0] = frame[0, 1] * frame[1, 2] - frame[0, 2] * frame[1, 1]
     frame[2, 1] = frame[0, 2] * frame[1, 0] - frame[0, 0] * frame[1, 2]
     frame[2, 2] = frame[0, 0] * frame[1, 1] - frame[0, 1] * frame[1, 0]

@@ -101,7 +101,7 @@ def test_non_finite_state_is_caught(tmp_path):
     """A NaN in the displacement field stops the run with the node and block named."""
     couplet = load_case("couplet")
     sim, stages = couplet.build(dict(couplet.PARAMS, h5=None))
-    sim._build()
+    sim.build()
     sim.dyn.U[7, 0] = np.nan
     with pytest.raises(SolverError, match=r"non-finite .* at node \d+ \(block \d\)"):
         sim.run(stages)
