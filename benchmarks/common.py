@@ -1,0 +1,43 @@
+"""Shared helpers of the benchmark scripts: output folder, machine line, table and CSV writing."""
+import csv
+import os
+import platform
+import sys
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(HERE)
+OUT = os.path.join(HERE, "out")
+if ROOT not in sys.path:  # ``cases`` is imported from the repository root
+    sys.path.insert(0, ROOT)
+
+
+def machine():
+    """One line describing the machine and its load at the time of the run."""
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    import numba
+    return (f"{platform.processor() or platform.machine()}, {os.cpu_count()} logical cores, "
+            f"load average {load:.2f} at start, Python {platform.python_version()}, "
+            f"numba {numba.__version__}")
+
+
+def report(rows, name, title):
+    """Print ``rows`` (list of dicts, same keys) as a markdown table and write ``out/<name>.csv``."""
+    os.makedirs(OUT, exist_ok=True)
+    keys = list(rows[0])
+    print(f"\n### {title}\n")
+    print("| " + " | ".join(keys) + " |")
+    print("|" + "---|" * len(keys))
+    for r in rows:
+        print("| " + " | ".join(_fmt(r[k]) for k in keys) + " |")
+    path = os.path.join(OUT, f"{name}.csv")
+    with open(path, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=keys)
+        w.writeheader()
+        w.writerows(rows)
+    print(f"\n(written {os.path.relpath(path, ROOT)})", flush=True)
+
+
+def _fmt(v):
+    if isinstance(v, float):
+        return f"{v:.4g}" if abs(v) < 1e4 else f"{v:,.0f}"
+    return str(v)

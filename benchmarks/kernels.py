@@ -1,0 +1,231 @@
+"""Kernel cost per unit of work: hexahedra, contact points and a whole DR iteration.
+
+Measures, on in-plane running-bond walls of the reference brick (mesh 4 x 2 x 1 per brick:
+along, thickness, height) built by ``dr_masonry.geometry.add_wall``:
+
+* ``hex_forces``: ns per element-step, elastic material (``PlasticDamage.elastic``) and the
+  reference plastic-damage material, with strains in the elastic range and with strains that make
+  every Gauss point plastic and damaged (the fraction of damaged Gauss points is printed);
+* ``contact_forces``: ns per contact-point-step, joints elastic and joints damaged (opened);
+* ``relax``: a full dynamic-relaxation iteration (viscous damping, gravity load, ``tol=0`` so it
+  runs ``relax_iters`` iterations), ns per element-iteration;
+* on each thread count of ``threads`` and each wall size of ``sizes``;
+* first-call compile time in a fresh subprocess with an empty ``NUMBA_CACHE_DIR``, then the cached
+  warm start in a second subprocess on the same cache (``compile=0`` skips both).
+
+Timings are best and median of ``repeats`` batches of at least ``min_time`` s each; the machine is
+shared, so compare ratios within one run. Run: ``python benchmarks/kernels.py [key=value ...]``;
+writes ``benchmarks/out/kernels*.csv``.
+"""
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+from common import ROOT, machine, report  # noqa: I100  (script folder on sys.path)
+
+PARAMS = dict(
+    sizes="1.1x0.81,4.0x2.75",  # wall length x height, m (comma separated)
+    threads="1,2",
+    repeats=5,
+    min_time=0.2,               # s per timed batch
+    relax_iters=100,
+    compile=True,
+    mode="all",                 # "all" or "firstcall" (used by the compile subprocesses)
+)
+ELASTIC_STRAIN = 2e-5           # uniaxial strain well inside the elastic range (0.1 MPa)
+PLASTIC_STRAIN = 1e-3           # uniaxial tension, trial stress 4.8 MPa >> ft = 1.5 MPa
+JUMP_ELASTIC = 2e-7             # m, block translations: joint gaps below u0 = ft / knn = 1.6 um
+JUMP_DAMAGED = 2e-4             # m, joint gaps far beyond u0
+
+
+def build(length, height):
+    """Simulation of a wall clamped at its base with its arrays built (no run)."""
+    from dr_masonry import JointLaw, Model, PlasticDamage, Simulation, SolverOptions
+    from dr_masonry.geometry import BrickSpec, add_wall, plane_nodes
+    import warnings
+    model = Model()
+    model.set_joint_law(JointLaw.reference())
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # length snapped to half bricks
+        add_wall(model, (0, 0, 0), length, height, PlasticDamage.reference(),
+                 brick=BrickSpec(nx_along=4, ny_thick=2, nz_height=1))
+    sim = Simulation(model, SolverOptions(damping="viscous"))
+    sim.fix(plane_nodes(model, 2, 0.0), "xyz")
+    sim.build()
+    return sim
+
+
+def displacement(sim, strain, jump, seed=0):
+    """Uniaxial strain along x (lateral contraction nu) plus a random translation per block."""
+    m = sim.model
+    X = m.nodes
+    U = np.zeros_like(X)
+    U[:, 0] = strain * X[:, 0]
+    U[:, 1] = -0.17 * strain * X[:, 1]
+    U[:, 2] = -0.17 * strain * X[:, 2]
+    t = np.random.default_rng(seed).uniform(-jump, jump, (m.n_blocks, 3))
+    return U + t[m.node_block]
+
+
+def hex_args(sim, U, elastic):
+    """Arguments of ``hex_forces`` for every element with the given material."""
+    from dr_masonry import PlasticDamage
+    me = sim.mesh
+    mat = PlasticDamage.elastic(4800e6, 0.17, 1800.0) if elastic else PlasticDamage.reference()
+    params = mat.params_array()[None, :]
+    s0 = np.repeat(np.repeat(mat.initial_state()[None, None, :], me.conn.shape[0], 0), 8, 1)
+    emat = np.zeros(me.conn.shape[0], dtype=np.int64)
+    return (U, me.conn, np.arange(me.conn.shape[0], dtype=np.int64), me.dN, me.wdet, me.h, emat,
+            params, s0, s0.copy(), np.zeros((me.conn.shape[0], 8, 3)), np.zeros(me.conn.shape[0]))
+
+
+def contact_args(sim, U):
+    c = sim.cont
+    x = sim.dyn.X + U
+    return (x, c.slave, c.master, c.xi, c.area, c.law, c.lparams, c.gap0, c.s_old, c.s_new,
+            c.gaps, c.trac, c.fbuf, c.psi)
+
+
+def gravity(sim):
+    """Self-weight on the free DOFs; returns the arguments of ``relax`` (iterations set later)."""
+    from dr_masonry.kernels import relaxation as R
+    d = sim.dyn
+    d.U[:] = 0.0
+    d.V[:] = 0.0
+    d.fext[:] = 0.0
+    d.fext[:, 2] = -9.81 * sim.mass * d.free[:, 2]
+    return [sim.mesh, sim.cont, d, np.zeros(1), np.zeros(3, dtype=np.int64), 1.0, R.DAMP_VISCOUS,
+            1.0, 0.0, sim.ref_floor, 1, 10, 0.5 * sim.size, np.zeros(R.N_INFO)]
+
+
+def timed(fn, args, repeats, min_time):
+    """(best, median) seconds per call over ``repeats`` batches of >= ``min_time`` s."""
+    fn(*args)
+    n = 1
+    while True:
+        t0 = time.perf_counter()
+        for _ in range(n):
+            fn(*args)
+        dt = time.perf_counter() - t0
+        if dt >= min_time:
+            break
+        n = max(2 * n, int(n * 1.2 * min_time / max(dt, 1e-9)))
+    per = [dt / n]
+    for _ in range(repeats - 1):
+        t0 = time.perf_counter()
+        for _ in range(n):
+            fn(*args)
+        per.append((time.perf_counter() - t0) / n)
+    return min(per), float(np.median(per))
+
+
+def steady(params):
+    import numba
+    from dr_masonry.kernels.contact_forces import contact_forces
+    from dr_masonry.kernels.hex8 import hex_forces
+    from dr_masonry.kernels.plastic_damage import MS_DT, MS_DC
+    from dr_masonry.kernels.relaxation import I_STATUS, ST_MAXITER, relax
+    rows = []
+    for size in params["sizes"].split(","):
+        length, height = (float(v) for v in size.lower().split("x"))
+        sim = build(length, height)
+        ne, nc = sim.model.elements.shape[0], sim.cont.slave.shape[0]
+        cases = []
+        for label, elastic, strain in (("hex elastic material", True, ELASTIC_STRAIN),
+                                       ("hex reference, elastic range", False, ELASTIC_STRAIN),
+                                       ("hex reference, plastic+damaged", False, PLASTIC_STRAIN)):
+            args = hex_args(sim, displacement(sim, strain, 0.0), elastic)
+            hex_forces(*args)
+            s_new = args[9]
+            frac = float(np.mean((s_new[:, :, MS_DT] > 0) | (s_new[:, :, MS_DC] > 0))) if not elastic else 0.0
+            cases.append((label, hex_forces, args, ne, "element-step", frac))
+        for label, jump in (("contact, joints elastic", JUMP_ELASTIC),
+                            ("contact, joints damaged", JUMP_DAMAGED)):
+            from dr_masonry.kernels.joint_law import JS_D
+            args = contact_args(sim, displacement(sim, 0.0, jump, seed=1))
+            contact_forces(*args)
+            frac = float(np.mean(args[9][:, JS_D] > 0))
+            cases.append((label, contact_forces, args, nc, "contact-step", frac))
+        rargs = gravity(sim)
+        rargs[10] = params["relax_iters"]
+        relax(*rargs)
+        assert rargs[-1][I_STATUS] == ST_MAXITER, "relax stopped early; the timing would be wrong"
+        cases.append(("relax iteration (viscous)", relax, rargs, ne * params["relax_iters"],
+                      "element-iteration", float("nan")))
+        for nt in (int(t) for t in params["threads"].split(",")):
+            numba.set_num_threads(nt)
+            for label, fn, args, units, unit, frac in cases:
+                best, med = timed(fn, args, params["repeats"], params["min_time"])
+                rows.append(dict(wall=f"{length}x{height}", elements=ne, contacts=nc, threads=nt,
+                                 kernel=label, unit=unit, ns_best=1e9 * best / units,
+                                 ns_median=1e9 * med / units, damaged_fraction=frac))
+                print(f"  {size} {nt}t {label}: {1e9 * best / units:.0f} ns/{unit}", flush=True)
+    report(rows, "kernels_steady", "Steady state, ns per unit of work")
+    # same-run ratios: 2 threads vs 1, plastic vs elastic
+    ratios = []
+    for size in sorted({r["wall"] for r in rows}):
+        sel = {(r["threads"], r["kernel"]): r["ns_best"] for r in rows if r["wall"] == size}
+        for k in {r["kernel"] for r in rows}:
+            if (1, k) in sel and (2, k) in sel:
+                ratios.append(dict(wall=size, kernel=k, speedup_2_threads=sel[(1, k)] / sel[(2, k)]))
+    if ratios:
+        report(ratios, "kernels_ratios", "Same-run speed-up of 2 threads over 1 (best times)")
+
+
+def firstcall():
+    """Time the first calls (compile or cache load) in this fresh process; prints JSON."""
+    from dr_masonry.kernels.contact_forces import contact_forces
+    from dr_masonry.kernels.hex8 import hex_forces
+    from dr_masonry.kernels.relaxation import relax
+    t = {}
+    t0 = t1 = time.perf_counter()
+    sim = build(0.44, 0.243)
+    t["build_s (geometry kernels + set-up)"] = time.perf_counter() - t1
+    for name, fn, args in (("hex_forces_s", hex_forces, hex_args(sim, displacement(sim, 1e-5, 0), False)),
+                           ("contact_forces_s", contact_forces, contact_args(sim, displacement(sim, 0, 1e-7))),
+                           ("relax_s", relax, gravity(sim))):
+        t1 = time.perf_counter()
+        fn(*args)
+        t[name] = time.perf_counter() - t1
+    t["first_calls_total_s"] = time.perf_counter() - t0
+    print(json.dumps(t))
+
+
+def compile_times():
+    rows = []
+    with tempfile.TemporaryDirectory() as cache:
+        env = dict(os.environ, NUMBA_CACHE_DIR=cache)
+        for label in ("cold (empty cache)", "warm (cached)"):
+            t0 = time.perf_counter()
+            out = subprocess.run([sys.executable, __file__, "mode=firstcall"], env=env, cwd=ROOT,
+                                 capture_output=True, text=True, check=True).stdout
+            wall = time.perf_counter() - t0
+            res = json.loads(out.strip().splitlines()[-1])
+            rows.append(dict(start=label, process_wall_s=wall, **res,
+                             interpreter_and_imports_s=wall - res["first_calls_total_s"]))
+            print(f"  {label}: {wall:.1f} s", flush=True)
+    report(rows, "kernels_firstcall", "First call: compile vs cached start (fresh processes)")
+
+
+def main(argv=None):
+    from dr_masonry.params import parse_overrides
+    params = parse_overrides(PARAMS, sys.argv[1:] if argv is None else argv, __doc__)
+    if params["mode"] == "firstcall":
+        firstcall()
+        return
+    import numba
+    print(f"machine: {machine()}")
+    steady(params)
+    print(f"numba threading layer used: {numba.threading_layer()}, "
+          f"OMP_WAIT_POLICY={os.environ.get('OMP_WAIT_POLICY')}")
+    if params["compile"]:
+        compile_times()
+
+
+if __name__ == "__main__":
+    main()
