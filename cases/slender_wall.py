@@ -1,0 +1,44 @@
+"""S4 slender wall: in-plane cyclic shear-compression of a 1.10 x 2.75 m wall (cf. paper COMP-2).
+
+A 1.10 m long (5 bricks) x 2.75 m high (34 courses) x 0.102 m running-bond wall on a fixed
+foundation block, with a stiff steel loading beam on top; same set-up, joints and output as the
+S5 squat wall (``cases/squat_wall.py``, whose builder this scene reuses). Vertical
+pre-compression 0.52 MPa kept constant; ``bc=double_clamped`` (beam rotation held, the reference
+run) or ``bc=cantilever`` (beam rotation free, like the paper's COMP-2). Horizontal displacement
+of the beam: monotonic to 2.5 % drift, or cyclic 0.05, 0.1, 0.2, 0.3, 0.5, 0.75, 1.0, 1.5, 2.0 %
+drift, two cycles each (:data:`dr_masonry.protocols.S4`).
+
+Expected behaviour (paper Figs. 13-14): a flexural (rocking) response: the bed joints open at
+the base and, double clamped, also at the top; peak base shear close to the rocking capacity
+(N L / 2 + tension) / H (cantilever) or twice that (double clamped), almost non-dissipative
+rocking loops at small drifts and toe crushing at large ones.
+
+Run: ``python cases/slender_wall.py [key=value ...]`` (or ``dr-masonry run slender_wall``); the
+coarse monotonic run takes a few minutes on 2 cores. ``fast=true`` runs a 0.88 x 0.81 m coarse
+wall in a few increments (test suite).
+"""
+from dr_masonry.cases import squat_wall
+from dr_masonry.protocols import S4
+from dr_masonry.units import MPa, mm
+
+PARAMS = dict(squat_wall.PARAMS, length=1.10, height=2.75, sigma=0.52 * MPa, bc="double_clamped",
+              drift=S4.monotonic, increments=40, step=1.0 * mm, out="results/slender_wall")
+FAST = squat_wall.FAST
+
+
+def build(params):
+    """Model and stages (see :func:`squat_wall.build`)."""
+    return squat_wall.build(params, S4)
+
+
+def run(params):
+    """Run; returns (simulation, history, push-stage mask)."""
+    return squat_wall.run(params, S4)
+
+
+def main(argv=None):
+    squat_wall.main(argv, __doc__, PARAMS, S4, "S4 slender wall")
+
+
+if __name__ == "__main__":
+    main()

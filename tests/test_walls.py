@@ -1,0 +1,162 @@
+"""In-plane walls S4/S5 (tiny coarse variants) against closed forms, and the protocol helpers.
+
+The tiny wall is 4 bricks (0.88 m) long, 10 courses (0.81 m) high, one hexahedron per brick.
+"""
+import math
+
+import numpy as np
+import pytest
+
+from dr_masonry import JointLaw, PlasticDamage
+from dr_masonry.cases import slender_wall, squat_wall
+from dr_masonry.loading import LoadingError
+from dr_masonry.params import ParameterError
+from dr_masonry.protocols import PROTOCOLS, S4, S5
+
+L, T, NC, HC = 0.88, 0.102, 10, 0.081
+H = NC * HC
+A = L * T
+G = 9.81
+LAW = JointLaw.reference()
+EB, NUB, RHO = 4800e6, 0.17, 1800.0     # brick E (Pa), Poisson, density (kg/m^3), MODEL.md sec. 4
+
+
+def tiny(module, **kw):
+    return dict(module.PARAMS, **squat_wall.FAST, h5=None, **kw)
+
+
+def stiffness(bc):
+    """Timoshenko stiffness (N/m) of the wall as a homogeneous beam, bricks and bed joints in
+    series: NC courses of bricks and NC + 1 bed joints (base and beam included), compressed
+    (normal stiffness kc_pen) and in elastic shear (kss); shear factor 5/6."""
+    n = NC + 1
+    ev = H / (H / EB + n / LAW.kc_pen)
+    gv = H / (H / (EB / (2 * (1 + NUB))) + n / LAW.kss)
+    inertia = T * L ** 3 / 12
+    bend = H ** 3 / ((3 if bc == "cantilever" else 12) * ev * inertia)
+    return 1.0 / (bend + H / (5 / 6 * gv * A))
+
+
+@pytest.fixture(scope="module")
+def squat():
+    """Tiny S5 (cantilever, 0.30 MPa) pushed monotonically to 0.2 % drift (1.6 mm)."""
+    sim, hist, push = squat_wall.run(tiny(squat_wall))
+    return sim, hist, push
+
+
+@pytest.fixture(scope="module")
+def slender_cyclic():
+    """Tiny S4 (double clamped, 0.52 MPa), the first two cyclic amplitudes, two cycles each."""
+    sim, hist, push = slender_wall.run(tiny(slender_wall, protocol="cyclic"))
+    return sim, hist, push
+
+
+def test_protocols_documented_amplitudes():
+    assert S5.amplitudes == (0.025, 0.05, 0.1, 0.15, 0.2, 0.3, 0.4, 0.5, 0.75)
+    assert S4.amplitudes == (0.05, 0.1, 0.2, 0.3, 0.5, 0.75, 1.0, 1.5, 2.0)
+    assert (S4.cycles, S5.cycles, S4.monotonic, S5.monotonic) == (2, 2, 2.5, 1.0)
+    assert PROTOCOLS["S6"].cycles == PROTOCOLS["S7"].cycles == 1
+    h = 2.75
+    p = S5.path(h, step=0.5e-3)
+    # peaks of the path: each amplitude reached twice in each direction, in order
+    inner = (np.diff(np.sign(np.diff(p))) != 0)
+    peaks = p[1:-1][inner]
+    expect = [s * a * 0.01 * h for a in S5.amplitudes for _ in range(2) for s in (1, -1)]
+    np.testing.assert_allclose(peaks, expect, rtol=1e-12)
+    assert np.max(np.abs(np.diff(np.concatenate([[0.0], p])))) <= 0.5e-3 + 1e-15
+    assert p[-1] == pytest.approx(0.0, abs=1e-15)
+    m = S4.monotonic_path(10, h)
+    assert m[-1] == pytest.approx(0.025 * h) and np.all(np.diff(m) > 0)
+    assert len(S4.path(h, step=1.0, n_amplitudes=1)) == 2 * 4 * 2  # min_points per quarter
+
+
+def test_protocol_bad_input():
+    with pytest.raises(LoadingError, match="height"):
+        S5.path(None)
+    with pytest.raises(LoadingError, match="step"):
+        S5.path(2.75, step=0.0)
+    with pytest.raises(LoadingError, match="n_amplitudes"):
+        S5.path(2.75, n_amplitudes=10)
+
+
+def test_variants_double_the_parameters():
+    ref_law, ref_block = squat_wall.materials()
+    law, block = squat_wall.materials("PAR_E")
+    for name in ("ft", "u_k", "c", "delta_k", "tan_phi", "mu"):
+        assert getattr(law, name) == pytest.approx(2 * getattr(ref_law, name))
+    assert law.knn == ref_law.knn and law.zeta == ref_law.zeta
+    assert block.compression[0][0] == pytest.approx(2 * 6.8e6)
+    assert block.fracture_energy("compression") == pytest.approx(
+        2 * PlasticDamage.reference().fracture_energy("compression"))
+    assert squat_wall.materials("PAR_B")[0].ft == ref_law.ft
+    assert squat_wall.materials(shear_damage="paper")[0].shear_damage == "paper"
+    with pytest.raises(ParameterError, match="variant"):
+        squat_wall.materials("PAR_F")
+    with pytest.raises(ParameterError, match="bc"):
+        squat_wall.build(tiny(squat_wall, bc="pinned"))
+
+
+def test_squat_vertical_reaction(squat):
+    """The foundation carries the pre-compression plus the wall's self-weight (to 0.5 %)."""
+    sim, hist, push = squat
+    expect = 0.30e6 * A + RHO * G * A * H
+    assert np.all(np.abs(hist["base.fz"][push] / expect - 1) < 0.005)
+    assert np.all(np.abs(hist["base.fx"][push] + hist["beam.fx"][push])
+                  < 0.005 * np.abs(hist["beam.fx"][push]).max())
+
+
+def test_squat_initial_stiffness(squat):
+    """First push increment against the Timoshenko closed form. Tolerance 25 %: the homogenised
+    beam ignores the head joints (softer) and the end constraints of a wall with H/L = 0.9 and a
+    coarse hexahedral mesh (stiffer); ignoring the joints would be 2.7 times stiffer."""
+    sim, hist, push = squat
+    i = np.nonzero(push)[0][0]
+    k = hist["beam.fx"][i] / hist["beam.ux"][i]
+    assert k == pytest.approx(stiffness("cantilever"), rel=0.25)
+
+
+def test_squat_capacity_bounds(squat):
+    """Base shear below the sliding capacity of the top bed joint (c A + tan(phi) N) and the
+    rocking capacity about the toe ((N + W) L / 2 + ft t L^2 / 2) / H; with sliding well above
+    rocking the wall must rock: the peak reaches 80 % of the no-tension rocking capacity."""
+    sim, hist, push = squat
+    n_top = 0.30e6 * A
+    n_base = n_top + RHO * G * A * H
+    v = np.abs(hist["beam.fx"][push])
+    slide = LAW.c * A + max(LAW.tan_phi, LAW.mu) * n_top
+    rock = (n_base * L / 2 + LAW.ft * T * L ** 2 / 2) / H
+    assert v.max() < slide and v.max() < rock
+    assert v.max() > 0.8 * n_base * L / 2 / H
+    assert hist["max_joint_damage"][-1] > 0.9       # the base joint has opened
+
+
+def test_squat_energy_balance(squat):
+    sim, hist, push = squat
+    assert np.all(np.abs(hist["balance_error"]) < 0.01)
+
+
+def test_slender_cyclic_reversal(slender_cyclic):
+    """Cyclic run through load reversals in one go: the beam follows the protocol, the base
+    shear changes sign with the displacement, the double-clamped stiffness matches the closed
+    form (25 %, see above), the energy balance holds."""
+    sim, hist, push = slender_cyclic
+    u, v = hist["beam.ux"][push], hist["beam.fx"][push]
+    np.testing.assert_allclose(u, S4.path(H, step=0.4e-3, n_amplitudes=2), atol=1e-12)
+    assert u.min() < 0 < u.max()
+    big = np.abs(u) > 0.5 * np.abs(u).max()
+    assert np.all(np.sign(v[big]) == np.sign(u[big]))
+    assert v[0] / u[0] == pytest.approx(stiffness("double_clamped"), rel=0.25)
+    n_base = 0.52e6 * A + RHO * G * A * H
+    assert np.abs(v).max() < 2 * (n_base * L / 2 + LAW.ft * T * L ** 2 / 2) / H
+    assert np.all(np.abs(hist["balance_error"]) < 0.01)
+    assert np.all(np.abs(hist["beam.ury"]) < 1e-12)   # rotation held
+
+
+def test_main_writes_outputs(tmp_path):
+    """The CLI entry runs the fast preset and writes HDF5, CSV, PNG and VTK."""
+    out = tmp_path / "s5"
+    squat_wall.main(["fast=true", "increments=3", "drift=0.03", f"out={out}"])
+    for suffix in (".h5", ".csv", ".png"):
+        assert (tmp_path / ("s5" + suffix)).exists()
+    assert (tmp_path / "s5_vtk").is_dir()
+    assert math.isfinite(np.loadtxt(str(out) + ".csv", delimiter=",", skiprows=1)[-1, 0])
