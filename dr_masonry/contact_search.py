@@ -415,6 +415,7 @@ def detect_contacts(model, tol=None, angle_tol=ANGLE_TOL):
         raise ModelError(f"detect_contacts: tol must be a finite length >= 0 m, got {tol}")
     if not (np.isfinite(angle_tol) and 0.0 <= angle_tol < 0.5 * np.pi):
         raise ModelError(f"detect_contacts: angle_tol must be in [0, pi/2) rad, got {angle_tol}")
+    model.check_overlaps(tol)
     F = _faces(model, x)
     blk = F["block"]
     p = _candidate_pairs(F["centre"], F["radius"], tol)

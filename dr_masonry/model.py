@@ -54,6 +54,22 @@ def box_corners(origin, size):
     return origin + 0.5 * (HEX_NATURAL + 1.0) * size
 
 
+#: corner indices of the six faces of a hexahedron (any orientation; normals fixed by the centroid)
+_FACE_CORNERS = np.array([[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4], [2, 3, 7, 6], [0, 4, 7, 3],
+                          [1, 2, 6, 5]])
+
+
+def _inside_block(corners, pts, tol):
+    """Which points (m, 3) lie inside the convex block ``corners`` (8, 3) by more than ``tol``."""
+    q = corners[_FACE_CORNERS]                                  # (6, 4, 3)
+    n = np.cross(q[:, 2] - q[:, 0], q[:, 3] - q[:, 1])
+    fc = q.mean(axis=1)
+    n *= np.sign(np.einsum("ij,ij->i", n, fc - corners.mean(axis=0)))[:, None]
+    n /= np.linalg.norm(n, axis=1)[:, None]
+    d = np.einsum("fk,mfk->mf", n, pts[:, None, :] - fc[None, :, :])
+    return np.all(d < -tol, axis=1)
+
+
 @dataclass
 class Block:
     """One block: its node and element ranges and its properties (read-only view)."""
@@ -317,6 +333,35 @@ class Model:
         out = np.einsum("ij,ij->i", nrm, x[q].mean(axis=1) - centre) < 0
         q[out] = q[out][:, ::-1]
         return grid, q
+
+    def check_overlaps(self, tol):
+        """Raise ModelError if two blocks overlap by more than ``tol`` (m).
+
+        Candidates are pairs whose bounding boxes overlap by more than ``tol`` along every axis
+        (touching blocks do not); for them, the nodes of each block, pulled 1e-3 of the way to
+        its centroid, are tested against the face planes of the other (blocks are convex with
+        planar faces).
+        """
+        from scipy.spatial import cKDTree
+        c = self.block_corners
+        if c.shape[0] < 2:
+            return
+        lo, hi = c.min(axis=1), c.max(axis=1)
+        centre = c.mean(axis=1)
+        radius = float(np.linalg.norm(hi - lo, axis=1).max())
+        pairs = cKDTree(centre).query_pairs(radius, output_type="ndarray")
+        if pairs.size == 0:
+            return
+        a, b = pairs[:, 0], pairs[:, 1]
+        keep = np.all(np.minimum(hi[a], hi[b]) - np.maximum(lo[a], lo[b]) > tol, axis=1)
+        x = self.nodes
+        for i, j in pairs[keep]:
+            for p, q in ((i, j), (j, i)):
+                pts = x[self._node_start[p]:self._node_start[p + 1]]
+                pts = pts + 1e-3 * (centre[p] - pts)
+                if np.any(_inside_block(c[q], pts, tol)):
+                    raise ModelError(f"blocks {i} and {j} overlap (by more than {tol:.2e} m); "
+                                     f"blocks may touch but not interpenetrate")
 
     def summary(self):
         """One-line description of the model size."""
