@@ -214,3 +214,24 @@ def test_sliding_dry_joint():
     np.testing.assert_allclose(lam[plateau], mu, rtol=0.02)
     assert abs(hist["top.ury"]).max() < 1e-3 * u.max() / h  # it slides, it does not rock
     assert np.all(np.abs(bal) < 0.01)
+
+
+def test_pressure_on_a_face_is_carried_to_the_support():
+    """A uniform pressure on the top face of a block resting on a clamped foundation: the
+    foundation reaction equals pressure x area and the compression is uniform (Hooke)."""
+    from dr_masonry import Pressure
+    from dr_masonry.geometry import plane_nodes
+    E, b, t, h, p = 5e9, 0.2, 0.1, 0.3, 1e6
+    m = Model()
+    m.set_joint_law(JointLaw.tied(1e14, 1e14))
+    mat = PlasticDamage.elastic(E, 0.0, 1000.0)
+    m.add_box((0, 0, -0.1), (b, t, 0.1), mat, (2, 1, 1), fixed=True)
+    blk = m.add_box((0, 0, 0), (b, t, h), mat, (2, 1, 3))
+    _, quads = m.block_face(blk, 1)                      # top face, outward normal +z
+    sim = Simulation(m, SolverOptions(tol=1e-8))
+    sim.fix(plane_nodes(m, 2, h), "xy")                  # no rigid-body drift sideways
+    hist = sim.run([Stage("press", 2, [Load(pattern=Pressure(quads), to=p)])])
+    top = plane_nodes(m, 2, h)
+    assert np.allclose(sim.dyn.U[top, 2], -p * h / E, rtol=2e-3)
+    base = np.nonzero(m.block_fixed[m.node_block])[0]
+    assert -sim.dyn.fint[base, 2].sum() == pytest.approx(-p * b * t, rel=1e-6)
