@@ -230,7 +230,7 @@ def test_pressure_on_a_face_is_carried_to_the_support():
     _, quads = m.block_face(blk, 1)                      # top face, outward normal +z
     sim = Simulation(m, SolverOptions(tol=1e-8))
     sim.fix(plane_nodes(m, 2, h), "xy")                  # no rigid-body drift sideways
-    hist = sim.run([Stage("press", 2, [Load(pattern=Pressure(quads), to=p)])])
+    sim.run([Stage("press", 2, [Load(pattern=Pressure(quads), to=p)])])
     top = plane_nodes(m, 2, h)
     assert np.allclose(sim.dyn.U[top, 2], -p * h / E, rtol=2e-3)
     base = np.nonzero(m.block_fixed[m.node_block])[0]
