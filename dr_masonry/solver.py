@@ -18,7 +18,7 @@ from .kernels import relaxation as R
 from .kernels.assembly import node_row_map
 from .kernels.contact_forces import contact_rowsum
 from .kernels.hex8 import hex_geometry, lumped_mass, stiffness_rowsum
-from .kernels.joint_law import JS_D, JS_DISS, JS_DMAX
+from .kernels.joint_law import JS_D, JS_DISS, JS_DISSF, JS_DMAX
 from .kernels.plastic_damage import MS_DC, MS_DISS, MS_DT
 
 Mesh = namedtuple("Mesh", "conn active dN wdet h emat mparams s_old s_new fbuf energy ptr rows")
@@ -26,7 +26,8 @@ Cont = namedtuple("Cont", "slave master xi area law lparams gap0 s_old s_new gap
 Dyn = namedtuple("Dyn", "X U V minv free tied fext P fint res rpX rpU rpV rpminv rpfree rpf rpP "
                         "rpptr rpnodes rpradius")
 
-DAMPING = {"kinetic": R.DAMP_KINETIC, "viscous": R.DAMP_VISCOUS, "local": R.DAMP_LOCAL}
+DAMPING = {"kinetic": R.DAMP_KINETIC, "viscous": R.DAMP_VISCOUS, "local": R.DAMP_LOCAL,
+           "fire": R.DAMP_FIRE}
 
 
 class SolverError(RuntimeError):
@@ -67,7 +68,7 @@ class SolverOptions:
         if self.damping not in DAMPING:
             raise ValueError(f"SolverOptions.damping: {self.damping!r} is not one of {list(DAMPING)}")
         if self.alpha is None:
-            self.alpha = {"viscous": 1.0, "local": 0.8, "kinetic": 0.0}[self.damping]
+            self.alpha = {"viscous": 1.0, "local": 0.8, "kinetic": 0.0, "fire": 0.1}[self.damping]
         for name in ("tol", "safety", "energy_tol"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
@@ -535,13 +536,15 @@ class Simulation:
         wd = mesh.wdet.sum(axis=1)
         vol = mesh.wdet
         d_blocks = float((mesh.s_old[:, :, MS_DISS] * vol).sum())
-        d_joints = float((cont.s_old[:, JS_DISS] * cont.area).sum()) if cont.slave.size else 0.0
+        d_joints = float(cont.s_old[:, JS_DISS] @ cont.area) if cont.slave.size else 0.0
+        d_friction = float(cont.s_old[:, JS_DISSF] @ cont.area) if cont.slave.size else 0.0
         w_ext = self.energy["W_ext"]
         err = w_ext - eint - d_blocks - d_joints
         self.increment += 1
         row = {"increment": self.increment, "iterations": info[R.I_ITERS],
                "residual": info[R.I_RESID], "time_s": elapsed, "lambda": lam,
                "W_ext": w_ext, "E_stored": eint, "D_blocks": d_blocks, "D_joints": d_joints,
+               "D_joint_damage": d_joints - d_friction, "D_joint_friction": d_friction,
                "E_damped": self.energy["E_damped"], "E_kinetic": info[R.I_KE],
                "balance_error": err / self.energy["W_gross"] if self.energy["W_gross"] > 0 else 0.0,
                "max_joint_damage": float(cont.s_old[:, JS_D].max()) if cont.slave.size else 0.0,

@@ -65,7 +65,8 @@ JS_DISS = 5    # cumulative dissipated energy, J/m^2
 JS_GU = 6      # gap [u, d1, d2] of this state (needed by the midpoint rule), m
 JS_G1 = 7
 JS_G2 = 8
-NJS = 9
+JS_DISSF = 9   # the part of JS_DISS dissipated by friction (slider), J/m^2
+NJS = 10
 
 #: delta0 is clamped to this fraction of delta_k (huge compression would otherwise put the peak
 #: beyond the point of zero cohesion)
@@ -179,8 +180,9 @@ def joint_point(p, u, d1, d2, s_old, s_new, t):
                                           - (g2o - dp2o) * (d2 - dp2))
     tfm1 = 0.5 * (kss * (g1o - dp1o) + tf1)
     tfm2 = 0.5 * (kss * (g2o - dp2o) + tf2)
-    s_new[JS_DISS] = (s_old[JS_DISS] + y * (dam - d_old)
-                      + 0.5 * (d_old + dam) * (tfm1 * (dp1 - dp1o) + tfm2 * (dp2 - dp2o)))
+    friction = 0.5 * (d_old + dam) * (tfm1 * (dp1 - dp1o) + tfm2 * (dp2 - dp2o))
+    s_new[JS_DISS] = s_old[JS_DISS] + y * (dam - d_old) + friction
+    s_new[JS_DISSF] = s_old[JS_DISSF] + friction
     s_new[JS_D] = dam
     s_new[JS_UMAX] = umax
     s_new[JS_DMAX] = dmax

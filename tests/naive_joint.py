@@ -15,7 +15,7 @@ def softening_fraction(x, x0, xk, k):
 
 def virgin(law):
     return {"D": 1.0 if law.is_dry else 0.0, "umax": 0.0, "dmax": 0.0, "dp": (0.0, 0.0),
-            "diss": 0.0, "gap": (0.0, 0.0, 0.0)}
+            "diss": 0.0, "dissf": 0.0, "gap": (0.0, 0.0, 0.0)}
 
 
 def tension_damage(law, umax):
@@ -91,7 +91,8 @@ def step(law, old, gap):
     tf_old = [law.kss * (g - q) for g, q in zip(old["gap"][1:], old["dp"])]
     slide = sum((a + b) / 2 * (q1 - q0) for a, b, q1, q0 in zip(tf_old, tf, dp, old["dp"]))
     new.update(D=D, umax=umax, dmax=dmax, dp=dp,
-               diss=old["diss"] + Y * (D - D_old) + (D_old + D) / 2 * slide)
+               diss=old["diss"] + Y * (D - D_old) + (D_old + D) / 2 * slide,
+               dissf=old["dissf"] + (D_old + D) / 2 * slide)
     return new, (sigma,) + tau
 
 

@@ -105,6 +105,9 @@ def test_kernel_matches_naive_reference(lp):
     np.testing.assert_allclose(r.damage, [s["D"] for s in ss], rtol=0, atol=1e-12)
     dref = np.array([s["diss"] for s in ss])
     np.testing.assert_allclose(r.dissipated, dref, rtol=0, atol=1e-12 * max(np.abs(dref).max(), 1.0))
+    fref = np.array([s["dissf"] for s in ss])
+    np.testing.assert_allclose(r.state[:, jk.JS_DISSF], fref, rtol=0,
+                               atol=1e-12 * max(np.abs(fref).max(), 1.0))
     np.testing.assert_allclose(r.state[:, jk.JS_DP1:jk.JS_DP2 + 1], [s["dp"] for s in ss],
                                rtol=0, atol=1e-12 * max(np.abs(path).max(), 1e-12))
 
@@ -416,3 +419,17 @@ def test_case_script_writes_outputs(tmp_path):
                  "joint_shear.csv", "joint_cyclic_shear.csv", "joint_cyclic_opening.csv"):
         assert (tmp_path / name).stat().st_size > 0, name
     assert summary["tension_peak"] == pytest.approx(0.12e6, rel=1e-3)
+
+
+def test_friction_dissipation_of_a_closed_slide_loop():
+    """Dry joint at constant compression: slide +a, back to -a, return to 0. The friction part
+    of the dissipation is mu |sigma| times the plastic slip travelled; there is no damage part."""
+    law = JointLaw.dry(0.6)
+    sigma = -0.5e6
+    u = sigma / law.kc_pen
+    a, stick = 1e-3, 0.6 * 0.5e6 / law.kss
+    s = np.r_[np.linspace(0, a, 400), np.linspace(a, -a, 800), np.linspace(-a, 0, 400)]
+    r = drive_joint(law, np.column_stack([np.full_like(s, u), s, np.zeros_like(s)]))
+    travelled = (a - stick) + (2 * a - 2 * stick) + (a - 2 * stick)
+    assert r.state[-1, jk.JS_DISSF] == pytest.approx(0.6 * 0.5e6 * travelled, rel=1e-3)
+    assert r.dissipated[-1] == pytest.approx(r.state[-1, jk.JS_DISSF], rel=1e-12)
