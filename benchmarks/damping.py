@@ -27,7 +27,7 @@ import numpy as np
 from common import ROOT, machine, report  # noqa: I100
 
 PARAMS = dict(
-    schemes="viscous,kinetic,local",
+    schemes="viscous,fire,kinetic,local",
     parts="scenes,size",
     sigma=0.6,               # S2 pre-compression, MPa
     s2_increments=30,

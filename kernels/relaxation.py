@@ -7,9 +7,15 @@ node DOFs, rigid reference points, indirect displacement control) and damps the 
 out-of-balance force is small against the applied loads and reactions.
 
 Damping schemes (``DAMP_*``): kinetic damping (velocities zeroed at every peak of the kinetic
-energy), viscous damping with a Rayleigh-quotient estimate of the lowest active frequency
-(Underwood), and Cundall's local non-viscous damping (force reduced by ``alpha`` against the
-velocity sign; the masses are raised by 1 + alpha, which the stable step needs).
+energy, displacements moved back to the peak), viscous damping with a Rayleigh-quotient estimate of the lowest active frequency
+(Underwood), Cundall's local non-viscous damping (force reduced by ``alpha`` against the
+velocity sign; the masses are raised by 1 + alpha, which the stable step needs), and FIRE (Bitzek
+et al. 2006, PRL 97 170201): undamped dynamics with an adaptive step factor ``dt`` <= 1, the
+velocity steered towards the force direction by the mixing factor ``a`` (``alpha`` at the start)
+while the power F.v is positive, and the motion stopped (``dt`` halved, ``a`` reset) when it turns
+negative. FIRE measures velocities and forces in the metric of the fictitious masses: the mixing
+``v <- (1 - a) v + a |v|_M M^-1 F / |M^-1 F|_M`` (``|v|_M^2 = v.M v``, ``|M^-1 F|_M^2 = F.M^-1 F``)
+never raises the kinetic energy; the reference points' DOFs take part with their masses.
 
 Arrays are grouped in three named tuples built by ``dr_masonry.solver``:
 ``mesh``: hexahedra (conn, active, dN, wdet, h, emat, mparams, s_old, s_new, fbuf, energy, ptr, rows);
@@ -26,6 +32,15 @@ from .hex8 import hex_forces
 DAMP_KINETIC = 0
 DAMP_VISCOUS = 1
 DAMP_LOCAL = 2
+DAMP_FIRE = 3
+
+# FIRE constants (Bitzek et al. 2006); the step factor is relative to the unit step of the masses
+FIRE_DT_START = 0.5
+FIRE_DT_MAX = 1.0
+FIRE_N_MIN = 5       # steps with positive power before the step may grow
+FIRE_F_INC = 1.1
+FIRE_F_DEC = 0.5
+FIRE_F_ALPHA = 0.99
 
 # status codes returned in info[I_STATUS]
 ST_CONVERGED = 0
@@ -171,8 +186,8 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, tol, ref_floor
         the unit pattern's (generalised) force on the controlled DOF, N (for a reference point:
         its own pattern load plus that of its tied nodes).
     scheme : int
-        DAMP_* constant; ``alpha`` its parameter (local damping coefficient, or the viscous
-        damping scale).
+        DAMP_* constant; ``alpha`` its parameter (local damping coefficient, the viscous
+        damping scale, or FIRE's initial mixing factor alpha_start).
     tol : float
         converged when ||r_free|| <= tol * max(reference, ref_floor).
     u_limit : float
@@ -195,6 +210,10 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, tol, ref_floor
     qty = 0.0
     # viscous damping: Rayleigh quotient with the previous internal force
     fprev = dyn.fint.copy()
+    # FIRE: step factor, mixing factor, steps since the last stop
+    dt = FIRE_DT_START if scheme == DAMP_FIRE else 1.0
+    a_mix = alpha
+    n_pos = 0
     place_rigid_nodes(dyn)
     for it in range(1, max_iter + 1):
         eint = internal_forces(mesh, cont, dyn)
@@ -238,6 +257,57 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, tol, ref_floor
             if c_visc > 1.9:
                 c_visc = 1.9
             fprev[:] = dyn.fint
+        # FIRE: v <- keep v + (c_mix + dt) M^-1 r (mixing, then the semi-implicit Euler step)
+        keep = 1.0
+        c_mix = 0.0
+        if scheme == DAMP_FIRE:
+            pw = 0.0   # power F.v, W
+            vmv = 0.0  # v.M v = 2 KE
+            fmf = 0.0  # F.M^-1 F
+            for i in range(n):
+                for k in range(3):
+                    if dyn.free[i, k] > 0.0:
+                        r = dyn.res[i, k]
+                        v = dyn.V[i, k]
+                        pw += r * v
+                        vmv += v * v / dyn.minv[i]
+                        fmf += r * r * dyn.minv[i]
+            for p in range(nr):
+                for k in range(6):
+                    if dyn.rpfree[p, k] > 0.0:
+                        r = rpres[p, k]
+                        v = dyn.rpV[p, k]
+                        pw += r * v
+                        vmv += v * v / dyn.rpminv[p, k]
+                        fmf += r * r * dyn.rpminv[p, k]
+            if pw < 0.0:
+                # moving uphill: stop, shorten the step, restart the mixing
+                # (P = 0 only at rest, where there is nothing to stop)
+                damped += 0.5 * vmv
+                keep = 0.0
+                # back half a step, to about where the power changed sign (FIRE 2.0)
+                for i in range(n):
+                    for k in range(3):
+                        if dyn.free[i, k] > 0.0:
+                            dyn.U[i, k] -= 0.5 * dt * dyn.V[i, k]
+                for p in range(nr):
+                    for k in range(6):
+                        if dyn.rpfree[p, k] > 0.0:
+                            dyn.rpU[p, k] -= 0.5 * dt * dyn.rpV[p, k]
+                dt *= FIRE_F_DEC
+                a_mix = alpha
+                n_pos = 0
+            else:
+                n_pos += 1
+                if n_pos > FIRE_N_MIN:
+                    dt = min(dt * FIRE_F_INC, FIRE_DT_MAX)
+                    a_mix *= FIRE_F_ALPHA
+                if fmf > 0.0:
+                    keep = 1.0 - a_mix
+                    c_mix = a_mix * np.sqrt(vmv / fmf)
+                    # |v_mixed|_M^2 = keep^2 vmv + 2 keep c_mix pw + c_mix^2 fmf <= vmv
+                    damped += 0.5 * (vmv - keep * keep * vmv - 2.0 * keep * c_mix * pw
+                                     - c_mix * c_mix * fmf)
         ke = 0.0
         for i in range(n):
             mi = 1.0 / dyn.minv[i]
@@ -252,6 +322,8 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, tol, ref_floor
                     elif scheme == DAMP_VISCOUS:
                         dyn.V[i, k] = ((2.0 - c_visc) * v + 2.0 * dyn.minv[i] * r) / (2.0 + c_visc)
                         damped += c_visc * mi * (0.5 * (v + dyn.V[i, k])) ** 2
+                    elif scheme == DAMP_FIRE:
+                        dyn.V[i, k] = keep * v + (c_mix + dt) * dyn.minv[i] * r
                     else:
                         dyn.V[i, k] += dyn.minv[i] * r
                     ke += 0.5 * mi * dyn.V[i, k] ** 2
@@ -261,6 +333,8 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, tol, ref_floor
                     r = rpres[p, k]
                     if scheme == DAMP_VISCOUS:
                         dyn.rpV[p, k] = ((2.0 - c_visc) * dyn.rpV[p, k] + 2.0 * dyn.rpminv[p, k] * r) / (2.0 + c_visc)
+                    elif scheme == DAMP_FIRE:
+                        dyn.rpV[p, k] = keep * dyn.rpV[p, k] + (c_mix + dt) * dyn.rpminv[p, k] * r
                     else:
                         if scheme == DAMP_LOCAL:
                             v = dyn.rpV[p, k]
@@ -270,8 +344,17 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, tol, ref_floor
                     ke += 0.5 * dyn.rpV[p, k] ** 2 / dyn.rpminv[p, k]
         if scheme == DAMP_KINETIC:
             if ke < ke_prev:
-                # kinetic-energy peak passed: stop every velocity
+                # kinetic-energy peak passed: stop every velocity and go back to the peak, half
+                # a step before U: U* = U - v_old / 2 with v_old = V - minv r (Barnes, Cundall)
                 damped += ke
+                for i in range(n):
+                    for k in range(3):
+                        if dyn.free[i, k] > 0.0:
+                            dyn.U[i, k] -= 0.5 * (dyn.V[i, k] - dyn.minv[i] * dyn.res[i, k])
+                for p in range(nr):
+                    for k in range(6):
+                        if dyn.rpfree[p, k] > 0.0:
+                            dyn.rpU[p, k] -= 0.5 * (dyn.rpV[p, k] - dyn.rpminv[p, k] * rpres[p, k])
                 dyn.V[:] = 0.0
                 dyn.rpV[:] = 0.0
                 ke = 0.0
@@ -281,7 +364,7 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, tol, ref_floor
         for i in range(n):
             for k in range(3):
                 if dyn.free[i, k] > 0.0:
-                    dyn.U[i, k] += dyn.V[i, k]
+                    dyn.U[i, k] += dt * dyn.V[i, k]
                     a = abs(dyn.U[i, k])
                     if a > umax or not np.isfinite(a):
                         umax = a
@@ -289,7 +372,7 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, tol, ref_floor
         for p in range(nr):
             for k in range(6):
                 if dyn.rpfree[p, k] > 0.0:
-                    dyn.rpU[p, k] += dyn.rpV[p, k]
+                    dyn.rpU[p, k] += dt * dyn.rpV[p, k]
         place_rigid_nodes(dyn)
         if not np.isfinite(umax):
             status = ST_NONFINITE
