@@ -81,7 +81,8 @@ def hex_args(sim, U, elastic):
     s0 = np.repeat(np.repeat(mat.initial_state()[None, None, :], me.conn.shape[0], 0), 8, 1)
     emat = np.zeros(me.conn.shape[0], dtype=np.int64)
     return (U, me.conn, np.arange(me.conn.shape[0], dtype=np.int64), me.dN, me.wdet, me.h, emat,
-            params, s0, s0.copy(), np.zeros((me.conn.shape[0], 8, 3)), np.zeros(me.conn.shape[0]))
+            params, s0, s0.copy(), np.zeros((me.conn.shape[0], 8, 3)), np.zeros(me.conn.shape[0]),
+            me.geo)
 
 
 def contact_args(sim, U):

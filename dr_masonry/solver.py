@@ -17,11 +17,11 @@ from . import loading as L
 from .kernels import relaxation as R
 from .kernels.assembly import node_row_map
 from .kernels.contact_forces import contact_rowsum
-from .kernels.hex8 import hex_geometry, lumped_mass, stiffness_rowsum
+from .kernels.hex8 import hex_geometry_shared, lumped_mass, stiffness_rowsum
 from .kernels.joint_law import JS_D, JS_DISS, JS_DISSF, JS_DMAX
 from .kernels.plastic_damage import MS_DC, MS_DISS, MS_DT
 
-Mesh = namedtuple("Mesh", "conn active dN wdet h emat mparams s_old s_new fbuf energy ptr rows")
+Mesh = namedtuple("Mesh", "conn active dN geo wdet h emat mparams s_old s_new fbuf energy ptr rows")
 Cont = namedtuple("Cont", "slave master xi area law lparams gap0 s_old s_new gaps trac fbuf psi ptr rows")
 Dyn = namedtuple("Dyn", "X U V minv free tied fext P fint res rpX rpU rpV rpminv rpfree rpf rpP "
                         "rpptr rpnodes rpradius")
@@ -167,7 +167,7 @@ class Simulation:
         X = m.nodes
         conn = m.elements
         n = m.n_nodes
-        dN, wdet, h = hex_geometry(X, conn)
+        dN, geo, wdet, h = hex_geometry_shared(X, conn)
         emat = m.block_material[m.element_block]
         mats = m.materials
         mparams = np.ascontiguousarray(np.vstack([mt.params_array() for mt in mats]))
@@ -182,10 +182,10 @@ class Simulation:
         s0 = np.stack([mt.initial_state() for mt in mats])[emat]
         s_old = np.ascontiguousarray(np.repeat(s0[:, None, :], 8, axis=1))
         ptr, rows = node_row_map(conn, n)
-        self.mesh = Mesh(conn, active, dN, wdet, h, emat, mparams, s_old, s_old.copy(),
+        self.mesh = Mesh(conn, active, dN, geo, wdet, h, emat, mparams, s_old, s_old.copy(),
                          np.zeros((conn.shape[0], 8, 3)), np.zeros(conn.shape[0]), ptr, rows)
         self.mass = lumped_mass(conn, wdet, rho, n)  # physical, kg
-        rowsum = stiffness_rowsum(conn, dN, wdet, E, nu, n)
+        rowsum = stiffness_rowsum(conn, dN, wdet, E, nu, n, geo)
         c = m.contacts
         laws = m.joint_laws
         if c.n:

@@ -10,4 +10,6 @@ FASTMATH = False  # keep IEEE semantics: NaN detection by the guards must work
 
 jit = numba.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
 pjit = numba.njit(cache=True, fastmath=FASTMATH, error_model="numpy", parallel=True)
+#: small per-point helpers: inlined in Numba IR, so callers loaded from the cache inline them too
+ijit = numba.njit(cache=True, fastmath=FASTMATH, error_model="numpy", inline="always")
 prange = numba.prange

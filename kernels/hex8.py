@@ -5,8 +5,11 @@ Conventions
 * Corner order is VTK's (``CORNERS[a]`` = natural coordinates of corner a, equal to
   ``dr_masonry.model.HEX_NATURAL``).
 * 2x2x2 Gauss rule, unit weights; Gauss point g sits at ``CORNERS[g] / sqrt(3)``.
-* ``dN`` (ne, 8, 8, 3) 1/m: dN_a/dX_i in the reference configuration, indexed
-  [element, gauss point, node, direction]; ``wdet`` (ne, 8) m^3: Gauss weight x det(dX/dxi).
+* ``dN`` (nt, 8, 8, 3) 1/m: dN_a/dX_i in the reference configuration, indexed
+  [table, gauss point, node, direction]; element e reads table ``geo[e]``. Elements equal up to
+  a translation (the bricks of a wall) share one table, found by :func:`hex_geometry_shared`;
+  :func:`hex_geometry` gives one table per element (``geo = arange(ne)``).
+  ``wdet`` (ne, 8) m^3: Gauss weight x det(dX/dxi), per element.
 * Deformation gradient F = I + sum_a u_a (x) dN_a; Green-Lagrange strain
   E = (H + H^T + H^T H) / 2 with H = F - I (no cancellation at small strain), Voigt order
   [xx, yy, zz, yz, xz, xy] with engineering shears; the material returns the second
@@ -15,8 +18,8 @@ Conventions
 """
 import numpy as np
 
-from .config import jit, pjit, prange
-from .plastic_damage import MP_ELASTIC, MS_EPSP, gp_update
+from .config import ijit, jit, pjit, prange
+from .plastic_damage import MP_ELASTIC, MS_EPSP, elastic_stress, gp_update
 
 CORNERS = np.array(
     [[-1, -1, -1], [1, -1, -1], [1, 1, -1], [-1, 1, -1],
@@ -27,6 +30,7 @@ GAUSS = CORNERS / np.sqrt(3.0)
 N_GAUSS = 0.125 * np.prod(1.0 + GAUSS[:, None, :] * CORNERS[None, :, :], axis=2)
 
 _CHUNK = 64  # elements per parallel work item (local scratch arrays allocated once per item)
+SHARE_RTOL = 1e-9  #: corner offsets equal to this fraction of the smallest element share a table
 
 
 class HexMeshError(ValueError):
@@ -111,8 +115,28 @@ def _check_mesh(X, conn):
     return X, np.ascontiguousarray(c, dtype=np.int64)
 
 
+def _tables(X, conn, elems):
+    """Geometry of the elements ``elems`` (ids into ``conn``), checked for positive Jacobians."""
+    sub = conn[elems]
+    nt = sub.shape[0]
+    dN = np.empty((nt, 8, 8, 3))
+    wdet = np.empty((nt, 8))
+    h = np.empty(nt)
+    _hex_geometry(X, sub, dN, wdet, h)
+    bad = ~(wdet > 0.0)
+    if np.any(bad):
+        rows = np.flatnonzero(bad.any(axis=1))
+        t = rows[np.argmin(elems[rows])]  # the first element with a bad table
+        g = int(np.argmax(bad[t]))
+        e = elems[t]
+        raise HexMeshError(f"conn: element {e} (nodes {conn[e].tolist()}) has a non-positive "
+                           f"Jacobian det = {wdet[t, g]:.6g} at Gauss point {g} (inverted or "
+                           f"degenerate hexahedron, or corners not in VTK order)")
+    return dN, wdet, h
+
+
 def hex_geometry(X, conn):
-    """Reference-configuration geometry of hexahedra at the 2x2x2 Gauss points.
+    """Reference-configuration geometry of hexahedra at the 2x2x2 Gauss points, one table each.
 
     Parameters
     ----------
@@ -124,7 +148,8 @@ def hex_geometry(X, conn):
     Returns
     -------
     dN : (ne, 8, 8, 3) float64, 1/m
-        dN_a/dX_i [element, gauss point, node, direction].
+        dN_a/dX_i [element, gauss point, node, direction] (``geo = arange(ne)`` for
+        :func:`hex_forces`).
     wdet : (ne, 8) float64, m^3
         Gauss weight x det J (sums to the element volume).
     h : (ne,) float64, m
@@ -136,22 +161,48 @@ def hex_geometry(X, conn):
         on malformed input or a non-positive Jacobian at a Gauss point (names the element).
     """
     X, conn = _check_mesh(X, conn)
-    ne = conn.shape[0]
-    dN = np.empty((ne, 8, 8, 3))
-    wdet = np.empty((ne, 8))
-    h = np.empty(ne)
-    _hex_geometry(X, conn, dN, wdet, h)
-    bad = ~(wdet > 0.0)
-    if np.any(bad):
-        e, g = np.argwhere(bad)[0]
-        raise HexMeshError(f"conn: element {e} (nodes {conn[e].tolist()}) has a non-positive "
-                           f"Jacobian det = {wdet[e, g]:.6g} at Gauss point {g} (inverted or "
-                           f"degenerate hexahedron, or corners not in VTK order)")
-    return dN, wdet, h
+    return _tables(X, conn, np.arange(conn.shape[0]))
+
+
+def hex_geometry_shared(X, conn):
+    """Geometry as :func:`hex_geometry`, one derivative table per distinct element shape.
+
+    Elements whose corner offsets from their corner 0 agree within ``SHARE_RTOL`` x the
+    smallest element extent (translated copies: the bricks of a wall) share the table of the
+    first of them; ``wdet`` and ``h`` are those of the table, given per element.
+
+    Returns
+    -------
+    dN : (nt, 8, 8, 3) float64, 1/m
+        dN_a/dX_i [table, gauss point, node, direction].
+    geo : (ne,) int64
+        table of each element.
+    wdet : (ne, 8) float64, m^3
+        Gauss weight x det J per element.
+    h : (ne,) float64, m
+        characteristic length per element.
+
+    Raises
+    ------
+    HexMeshError
+        as :func:`hex_geometry`.
+    """
+    X, conn = _check_mesh(X, conn)
+    if conn.shape[0] == 0:
+        return np.empty((0, 8, 8, 3)), np.empty(0, np.int64), np.empty((0, 8)), np.empty(0)
+    off = X[conn[:, 1:]] - X[conn[:, :1]]  # (ne, 7, 3)
+    extent = np.abs(off).max(axis=(1, 2))
+    pos = extent[extent > 0.0]  # a degenerate element gets its own table, refused by _tables
+    quantum = SHARE_RTOL * (pos.min() if pos.size else 1.0)
+    key = np.round(off.reshape(-1, 21) / quantum).astype(np.int64)
+    _, first, geo = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    dN, wdet, h = _tables(X, conn, first)
+    geo = geo.ravel().astype(np.int64)
+    return dN, geo, wdet[geo], h[geo]
 
 
 # ---------------------------------------------------------------------------- internal forces
-@jit
+@ijit
 def hex_gauss_strain(ue, dng, F, eps):
     """Deformation gradient ``F`` (3, 3) and Green-Lagrange strain ``eps`` (6,) at one Gauss point.
 
@@ -182,7 +233,7 @@ def hex_gauss_strain(ue, dng, F, eps):
     F[2, 0], F[2, 1], F[2, 2] = h20, h21, 1.0 + h22
 
 
-@jit
+@ijit
 def hex_add_gauss_force(F, sig, dng, w, fe):
     """Add the Gauss point's contribution w F S dN_a to the element forces ``fe`` (8, 3) N.
 
@@ -200,7 +251,8 @@ def hex_add_gauss_force(F, sig, dng, w, fe):
 
 
 @pjit
-def hex_forces(U, conn, active, dN, wdet, h, elem_mat, params, s_old, s_new, f_elem, energy):
+def hex_forces(U, conn, active, dN, wdet, h, elem_mat, params, s_old, s_new, f_elem, energy,
+               geo=None):
     """Internal forces and stored elastic energy of the ``active`` elements (parallel, race-free).
 
     Parameters
@@ -212,11 +264,12 @@ def hex_forces(U, conn, active, dN, wdet, h, elem_mat, params, s_old, s_new, f_e
     active : (na,) int64
         element ids to compute; other elements are untouched.
     dN, wdet, h
-        from :func:`hex_geometry`.
+        from :func:`hex_geometry_shared` (with ``geo``) or :func:`hex_geometry`.
     elem_mat : (ne,) int64
         row of ``params`` for each element.
     params : (nmat, NMP) float64
-        ``PlasticDamage.params_array()`` rows.
+        ``PlasticDamage.params_array()`` rows; a row with ``p[MP_ELASTIC] == 1`` takes the
+        elastic fast path (``elastic_stress``, no state read or written).
     s_old, s_new : (ne, 8, NMS) float64
         committed (read) and trial (written by ``gp_update``; not for elastic materials)
         Gauss-point states.
@@ -225,7 +278,11 @@ def hex_forces(U, conn, active, dN, wdet, h, elem_mat, params, s_old, s_new, f_e
     energy : (ne,) float64, J
         stored elastic energy sum_g wdet 0.5 S : (E - E_p), written (E_p = 0 for a
         material with ``p[MP_ELASTIC] == 1``).
+    geo : (ne,) int64 or None
+        derivative table of each element; None: ``dN`` has one table per element.
     """
+    if geo is None and dN.shape[0] != conn.shape[0]:
+        raise ValueError("hex_forces: dN has not one table per element; pass geo")
     na = active.shape[0]
     nchunk = (na + _CHUNK - 1) // _CHUNK
     for c in prange(nchunk):
@@ -242,22 +299,27 @@ def hex_forces(U, conn, active, dN, wdet, h, elem_mat, params, s_old, s_new, f_e
                     ue[a, i] = U[n, i]
                     fe[a, i] = 0.0
             p = params[elem_mat[e]]
-            plastic = p[MP_ELASTIC] != 1.0  # the elastic fast path writes no state
-            he = h[e]
+            plastic = p[MP_ELASTIC] != 1.0
+            if geo is None:
+                dne = dN[e]
+            else:
+                dne = dN[geo[e]]
             en = 0.0
             for g in range(8):
-                dng = dN[e, g]
-                so = s_old[e, g]
-                sn = s_new[e, g]
+                dng = dne[g]
                 hex_gauss_strain(ue, dng, F, eps)
-                gp_update(p, he, eps, so, sn, sig)
                 w = wdet[e, g]
-                hex_add_gauss_force(F, sig, dng, w, fe)
                 acc = 0.0
-                for m in range(6):
-                    acc += sig[m] * eps[m]
-                    if plastic:
-                        acc -= sig[m] * sn[MS_EPSP + m]
+                if plastic:
+                    sn = s_new[e, g]
+                    gp_update(p, h[e], eps, s_old[e, g], sn, sig)
+                    for m in range(6):
+                        acc += sig[m] * (eps[m] - sn[MS_EPSP + m])
+                else:
+                    elastic_stress(p, eps, sig)
+                    for m in range(6):
+                        acc += sig[m] * eps[m]
+                hex_add_gauss_force(F, sig, dng, w, fe)
                 en += 0.5 * w * acc
             energy[e] = en
 
@@ -302,12 +364,12 @@ def hex_stiffness(dne, we, E, nu, ke):
 
 
 @pjit
-def _stiffness_rowsum_elem(dN, wdet, E, nu, r):
+def _stiffness_rowsum_elem(dN, geo, wdet, E, nu, r):
     """Per element corner bound ``r`` (ne, 8): max over the corner's 3 dofs of sum_j |K_ij|."""
-    ne = dN.shape[0]
+    ne = wdet.shape[0]
     for e in prange(ne):
         ke = np.empty((24, 24))
-        hex_stiffness(dN[e], wdet[e], E[e], nu[e], ke)
+        hex_stiffness(dN[geo[e]], wdet[e], E[e], nu[e], ke)
         for a in range(8):
             best = 0.0
             for i in range(3):
@@ -318,14 +380,19 @@ def _stiffness_rowsum_elem(dN, wdet, E, nu, r):
             r[e, a] = best
 
 
-def stiffness_rowsum(conn, dN, wdet, E, nu, n_nodes):
+def stiffness_rowsum(conn, dN, wdet, E, nu, n_nodes, geo=None):
     """Gershgorin bound of the assembled linear stiffness per node (N/m), shape (n_nodes,).
 
     For each element, the absolute row sums of its 24x24 reference stiffness, max over the
     node's 3 dofs, summed over the node's elements: bounds every row sum of the assembled K.
-    ``E`` (ne,) Pa and ``nu`` (ne,) per element.
+    ``dN``, ``wdet``, ``geo`` as for :func:`hex_forces`; ``E`` (ne,) Pa and ``nu`` (ne,) per
+    element.
     """
-    ne = dN.shape[0]
+    ne = wdet.shape[0]
+    geo = np.arange(ne) if geo is None else np.ascontiguousarray(geo, dtype=np.int64)
+    if geo.shape != (ne,) or (ne and (geo.min() < 0 or geo.max() >= dN.shape[0])):
+        raise HexMeshError(f"geo must be ({ne},) table ids in [0, {dN.shape[0]}), got shape "
+                           f"{geo.shape}")
     E = np.ascontiguousarray(E, dtype=np.float64)
     nu = np.ascontiguousarray(nu, dtype=np.float64)
     if E.shape != (ne,) or not np.all(E > 0.0) or not np.all(np.isfinite(E)):
@@ -335,5 +402,5 @@ def stiffness_rowsum(conn, dN, wdet, E, nu, n_nodes):
         raise HexMeshError(f"nu must be ({ne},) Poisson ratios in (-1, 0.5), got shape "
                            f"{nu.shape}")
     r = np.empty((ne, 8))
-    _stiffness_rowsum_elem(dN, wdet, E, nu, r)
+    _stiffness_rowsum_elem(dN, geo, wdet, E, nu, r)
     return np.bincount(np.asarray(conn).ravel(), weights=r.ravel(), minlength=n_nodes)

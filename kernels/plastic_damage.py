@@ -21,7 +21,7 @@ at crack-band scale s = h_ref / h equal to ``a_j + s b_j``.
 """
 import numpy as np
 
-from .config import jit
+from .config import ijit, jit
 
 NTAB = 257  #: points of each densified hardening table
 
@@ -166,6 +166,18 @@ def _returned(p, s, dl, i1tr, qtr, e1, e2, e3, kt0, kc0):
     return f, i1, rho, w, kt, kc, sbt, sbc, dt, dc, r
 
 
+@ijit
+def elastic_stress(p, eps, sig):
+    """Linear elastic stress ``sig`` (6,) Pa = lam tr(eps) 1 + 2 mu eps of strain ``eps`` (6,)
+    (Voigt [xx, yy, zz, yz, xz, xy], engineering shears) with the Lame constants of ``p``."""
+    lam = p[MP_LAM]
+    mu = p[MP_MU]
+    tr = eps[0] + eps[1] + eps[2]
+    for i in range(3):
+        sig[i] = lam * tr + 2.0 * mu * eps[i]
+        sig[i + 3] = mu * eps[i + 3]
+
+
 @jit
 def gp_update(p, h, eps, s_old, s_new, sig):
     """Stress update at one Gauss point.
@@ -185,14 +197,10 @@ def gp_update(p, h, eps, s_old, s_new, sig):
     sig : (6,) float64
         stress written, Pa, same Voigt order.
     """
-    lam = p[MP_LAM]
-    mu = p[MP_MU]
     if p[MP_ELASTIC] == 1.0:
-        tr = eps[0] + eps[1] + eps[2]
-        for i in range(3):
-            sig[i] = lam * tr + 2.0 * mu * eps[i]
-            sig[i + 3] = mu * eps[i + 3]
+        elastic_stress(p, eps, sig)
         return
+    mu = p[MP_MU]
     for i in range(NMS):
         s_new[i] = s_old[i]
     flag = int(s_old[MS_FLAG])

@@ -18,7 +18,7 @@ negative. FIRE measures velocities and forces in the metric of the fictitious ma
 never raises the kinetic energy; the reference points' DOFs take part with their masses.
 
 Arrays are grouped in three named tuples built by ``dr_masonry.solver``:
-``mesh``: hexahedra (conn, active, dN, wdet, h, emat, mparams, s_old, s_new, fbuf, energy, ptr, rows);
+``mesh``: hexahedra (conn, active, dN, geo, wdet, h, emat, mparams, s_old, s_new, fbuf, energy, ptr, rows);
 ``cont``: contact points (slave, master, xi, area, law, lparams, gap0, s_old, s_new, gaps, trac,
 fbuf, psi, ptr, rows); ``dyn``: nodal and reference-point state (see ``SystemArrays`` in the solver).
 """
@@ -107,7 +107,7 @@ def internal_forces(mesh, cont, dyn):
     e = 0.0
     if mesh.active.shape[0] > 0:
         hex_forces(dyn.U, mesh.conn, mesh.active, mesh.dN, mesh.wdet, mesh.h, mesh.emat,
-                   mesh.mparams, mesh.s_old, mesh.s_new, mesh.fbuf, mesh.energy)
+                   mesh.mparams, mesh.s_old, mesh.s_new, mesh.fbuf, mesh.energy, mesh.geo)
         gather_add(mesh.fbuf.reshape((-1, 3)), mesh.ptr, mesh.rows, dyn.fint)
         for q in range(mesh.active.shape[0]):
             e += mesh.energy[mesh.active[q]]

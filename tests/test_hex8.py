@@ -44,7 +44,7 @@ def distorted_element(rng, amp=0.15):
 def run_forces(U, X, conn, E, nu, elem_mat=None, params=None):
     """Element forces, energies and nodal forces of an elastic mesh."""
     ne = conn.shape[0]
-    dN, wdet, h = hex8.hex_geometry(X, conn)
+    dN, geo, wdet, h = hex8.hex_geometry_shared(X, conn)
     if params is None:
         params = elastic_params(E, nu)[None, :]
         elem_mat = np.zeros(ne, dtype=np.int64)
@@ -53,7 +53,7 @@ def run_forces(U, X, conn, E, nu, elem_mat=None, params=None):
     f_elem = np.full((ne, 8, 3), np.nan)
     energy = np.full(ne, np.nan)
     hex8.hex_forces(np.ascontiguousarray(U, dtype=float), conn, np.arange(ne), dN, wdet, h,
-                    elem_mat, params, s_old, s_new, f_elem, energy)
+                    elem_mat, params, s_old, s_new, f_elem, energy, geo)
     ptr, idx = node_row_map(conn, X.shape[0])
     f_node = np.empty_like(X)
     f_node[:] = 0.0
@@ -186,14 +186,15 @@ def test_inactive_elements_untouched():
     rng = np.random.default_rng(7)
     X, conn = box_mesh((3, 2, 1))
     ne = conn.shape[0]
-    dN, wdet, h = hex8.hex_geometry(X, conn)
+    dN, geo, wdet, h = hex8.hex_geometry_shared(X, conn)
+    assert dN.shape[0] == 1 and np.all(geo == 0)  # identical boxes share one table
     params = elastic_params(1e10, 0.2)[None, :]
     f_elem = np.full((ne, 8, 3), -7.0)
     energy = np.full(ne, -7.0)
     s_old, s_new = np.zeros((ne, 8, NMS)), np.full((ne, 8, NMS), -7.0)
     active = np.array([4, 1], dtype=np.int64)
     hex8.hex_forces(rng.normal(0, 1e-3, X.shape), conn, active, dN, wdet, h,
-                    np.zeros(ne, np.int64), params, s_old, s_new, f_elem, energy)
+                    np.zeros(ne, np.int64), params, s_old, s_new, f_elem, energy, geo)
     idle = np.setdiff1d(np.arange(ne), active)
     assert np.all(f_elem[idle] == -7.0) and np.all(energy[idle] == -7.0)
     assert np.all(s_new[idle] == -7.0)
@@ -262,6 +263,76 @@ def test_rigid_rotation_is_stress_free_and_forces_rotate(mesh):
     assert np.allclose(enRA, enA, rtol=1e-10)
 
 
+def _mixed_mesh(rng):
+    """Boxes, distorted elements, translated copies of one distorted element (one with 1e-15 m
+    noise) and a copy with one corner moved by 1 um. Returns X, conn and the expected tables."""
+    X, conn = box_mesh((4, 3, 2), (0.8, 0.3, 0.2))
+    moved = X[:, 0] > 0.5  # elements with x <= 0.4 m stay boxes: 2 x 3 x 2 = 12, one table
+    X[moved] += rng.uniform(-0.02, 0.02, (moved.sum(), 3))  # 12 distinct distorted elements
+    xd = 0.1 * distorted_element(rng)
+    xd2 = xd.copy()
+    xd2[6] += 1e-6
+    extra = [xd + [2.0, 0.0, 0.0], xd + [3.0, 1.0, 0.0] + rng.uniform(-1e-15, 1e-15, (8, 3)),
+             xd + [4.0, 0.0, 5.0], xd2 + [5.0, 0.0, 0.0]]
+    conn = np.concatenate([conn, X.shape[0] + np.arange(32).reshape(4, 8)])
+    return np.concatenate([X] + extra), conn, 1 + 12 + 1 + 1
+
+
+def test_shared_tables_match_per_element_tables():
+    """Shared derivative tables give the forces, energies and states of per-element tables."""
+    rng = np.random.default_rng(12)
+    X, conn, n_tables = _mixed_mesh(rng)
+    ne = conn.shape[0]
+    dN, geo, wdet, h = hex8.hex_geometry_shared(X, conn)
+    dNe, wde, he = hex8.hex_geometry(X, conn)
+    assert dN.shape == (n_tables, 8, 8, 3) and geo.shape == (ne,) and geo.dtype == np.int64
+    assert np.unique(geo[:24].reshape(4, 3, 2)[:2]).size == 1  # the boxes (x index < 2)
+    assert geo[-4] == geo[-3] == geo[-2] != geo[-1]
+    assert np.allclose(dN[geo], dNe, rtol=0, atol=1e-12 * np.abs(dNe).max())
+    assert np.allclose(wdet, wde, rtol=1e-12, atol=0) and np.allclose(h, he, rtol=1e-12, atol=0)
+    # half elastic material (fast path), half damaging material in its elastic range
+    mats = [PlasticDamage.elastic(5e9, 0.2, 1800.0), PlasticDamage(E=5e9, nu=0.15, density=1800.0)]
+    params = np.array([m.params_array() for m in mats])
+    elem_mat = rng.integers(0, 2, ne).astype(np.int64)
+    s0 = np.array([m.initial_state() for m in mats])[elem_mat]
+    s_old = np.ascontiguousarray(np.repeat(s0[:, None, :], 8, axis=1))
+    U = rng.uniform(-2e-6, 2e-6, X.shape)
+    out = []
+    for d, w, hh, g in ((dN, wdet, h, geo), (dNe, wde, he, None)):
+        f, en, sn = np.full((ne, 8, 3), np.nan), np.full(ne, np.nan), np.full_like(s_old, -1.0)
+        hex8.hex_forces(U, conn, np.arange(ne), d, w, hh, elem_mat, params, s_old, sn, f, en, g)
+        out.append((f, en, sn))
+    (f, en, sn), (fe, ene, sne) = out
+    assert np.abs(f - fe).max() <= 1e-12 * np.abs(fe).max()
+    assert np.allclose(en, ene, rtol=1e-12, atol=0) and np.all(en > 0.0)
+    assert np.all(sn[elem_mat == 0] == -1.0)  # elastic fast path writes no state
+    assert np.array_equal(sn[elem_mat == 1], s_old[elem_mat == 1])  # no damage at this strain
+
+
+def test_shared_geometry_input_errors():
+    rng = np.random.default_rng(13)
+    X, conn, _ = _mixed_mesh(rng)
+    bad = conn.copy()
+    bad[25] = bad[25][[1, 0, 3, 2, 5, 4, 7, 6]]  # inverted copy of the distorted element
+    with pytest.raises(hex8.HexMeshError, match="element 25 "):
+        hex8.hex_geometry_shared(X, bad)
+    flat = X.copy()
+    flat[conn[27]] = flat[conn[27, 0]]  # degenerate (all corners at one point)
+    with pytest.raises(hex8.HexMeshError, match="element 27 "):
+        hex8.hex_geometry_shared(flat, conn)
+    with pytest.raises(hex8.HexMeshError, match="conn"):
+        hex8.hex_geometry_shared(X, conn[:, :7])
+    dN, geo, wdet, h = hex8.hex_geometry_shared(X, conn[:0])
+    assert dN.shape == (0, 8, 8, 3) and geo.shape == (0,) and wdet.shape == (0, 8)
+    # shared tables without geo are refused (not read out of bounds)
+    dN, geo, wdet, h = hex8.hex_geometry_shared(X, conn)
+    ne = conn.shape[0]
+    with pytest.raises(ValueError, match="geo"):
+        hex8.hex_forces(np.zeros_like(X), conn, np.arange(ne), dN, wdet, h, np.zeros(ne, np.int64),
+                        elastic_params(1e9, 0.2)[None, :], np.zeros((ne, 8, NMS)),
+                        np.zeros((ne, 8, NMS)), np.zeros((ne, 8, 3)), np.zeros(ne))
+
+
 # ---------------------------------------------------------------------------- stiffness
 def test_stiffness_is_jacobian_of_forces():
     rng = np.random.default_rng(11)
@@ -316,18 +387,22 @@ def test_cantilever_converges_to_timoshenko():
 def test_gershgorin_bound_brackets_max_eigenvalue():
     rng = np.random.default_rng(2)
     X, conn = box_mesh((3, 2, 2), (1.5, 0.6, 0.8))
-    X = X + rng.uniform(-0.04, 0.04, X.shape)
+    moved = X[:, 0] > 0.6  # elements off these nodes stay identical boxes (one shared table)
+    X[moved] += rng.uniform(-0.04, 0.04, (moved.sum(), 3))
     E, nu = 2e10, 0.2
-    dN, wdet, _ = hex8.hex_geometry(X, conn)
+    dN, geo, wdet, _ = hex8.hex_geometry_shared(X, conn)
     ne = conn.shape[0]
-    bound = hex8.stiffness_rowsum(conn, dN, wdet, np.full(ne, E), np.full(ne, nu), X.shape[0])
+    assert dN.shape[0] == 1 + 8  # the 4 boxes at x < 0.5 m, then 8 distorted elements
+    bound = hex8.stiffness_rowsum(conn, dN, wdet, np.full(ne, E), np.full(ne, nu), X.shape[0], geo)
     K = assemble_K(X, conn, E, nu)
     rows = np.asarray(abs(K).sum(axis=1)).ravel().reshape(-1, 3)
     assert np.all(rows <= bound[:, None] * (1 + 1e-12))
     lmax = spla.eigsh(K, k=1, which="LA", return_eigenvectors=False)[0]
     assert lmax <= bound.max() <= 3.0 * lmax
     with pytest.raises(ValueError, match="nu"):
-        hex8.stiffness_rowsum(conn, dN, wdet, np.full(ne, E), np.full(ne, 0.5), X.shape[0])
+        hex8.stiffness_rowsum(conn, dN, wdet, np.full(ne, E), np.full(ne, 0.5), X.shape[0], geo)
+    with pytest.raises(ValueError, match="geo"):
+        hex8.stiffness_rowsum(conn, dN, wdet, np.full(ne, E), np.full(ne, nu), X.shape[0], geo + 9)
 
 
 # ---------------------------------------------------------------------------- mass, gather
