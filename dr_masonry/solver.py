@@ -178,14 +178,22 @@ class Simulation:
         rho = np.array([mt.density for mt in mats])[emat]
         E = np.array([mt.E for mt in mats])[emat]
         nu = np.array([mt.nu for mt in mats])[emat]
-        active = np.nonzero(~m.block_fixed[m.element_block])[0].astype(np.int64)
+        tied = np.full(n, -1, dtype=np.int64)
+        for p, rp in enumerate(self.rigid_points):
+            tied[rp.nodes] = p
+        # elements of fixed blocks, and elements moving rigidly with one reference point, have no
+        # strain: no force computation, and no stiffness in the fictitious masses
+        et = tied[conn]
+        rigid = (et[:, 0] >= 0) & np.all(et == et[:, :1], axis=1)
+        active = np.nonzero(~m.block_fixed[m.element_block] & ~rigid)[0].astype(np.int64)
         s0 = np.stack([mt.initial_state() for mt in mats])[emat]
         s_old = np.ascontiguousarray(np.repeat(s0[:, None, :], 8, axis=1))
         ptr, rows = node_row_map(conn, n)
         self.mesh = Mesh(conn, active, dN, geo, wdet, h, emat, mparams, s_old, s_old.copy(),
                          np.zeros((conn.shape[0], 8, 3)), np.zeros(conn.shape[0]), ptr, rows)
         self.mass = lumped_mass(conn, wdet, rho, n)  # physical, kg
-        rowsum = stiffness_rowsum(conn, dN, wdet, E, nu, n, geo)
+        a = active
+        rowsum = stiffness_rowsum(conn[a], dN, wdet[a], E[a], nu[a], n, geo[a])
         c = m.contacts
         laws = m.joint_laws
         if c.n:
@@ -202,14 +210,13 @@ class Simulation:
         self.cont = Cont(c.slave, c.master, c.xi, c.area, c.law, lparams, c.gap0,
                          np.ascontiguousarray(js0), js0.copy(), np.zeros((nc, 3)), np.zeros((nc, 3)),
                          np.zeros((nc * 5, 3)), np.zeros(nc), cptr, crows)
-        free_nodes = ~self._fixed.all(axis=1)
+        free_nodes = ~self._fixed.all(axis=1) & (tied < 0)
         if np.any(rowsum[free_nodes] <= 0):
             bad = int(np.nonzero(free_nodes & (rowsum <= 0))[0][0])
             raise SolverError(f"node {bad} (block {m.node_block[bad]}) has no stiffness: it belongs to "
                               f"no active element and no contact")
         fict = np.where(rowsum > 0, o.safety * rowsum / 4.0, 1.0)
         free = (~self._fixed).astype(np.float64)
-        tied = np.full(n, -1, dtype=np.int64)
         nr = len(self.rigid_points)
         rpX = np.zeros((nr, 3))
         rpminv = np.ones((nr, 6))
@@ -218,12 +225,14 @@ class Simulation:
         for p, rp in enumerate(self.rigid_points):
             if self._fixed[rp.nodes].any():
                 raise L.LoadingError(f"rigid point {rp.name!r} ties nodes that are also fixed")
-            tied[rp.nodes] = p
             free[rp.nodes] = 0.0
             rpX[p] = rp.position
             arm2 = ((X[rp.nodes] - rp.position) ** 2).sum(axis=1)
-            mt = fict[rp.nodes].sum()
-            jr = (fict[rp.nodes] * arm2).sum()
+            mt = (fict[rp.nodes] * (rowsum[rp.nodes] > 0)).sum()
+            if mt <= 0.0:
+                raise L.LoadingError(f"rigid point {rp.name!r}: its nodes touch no deformable element "
+                                     f"and no contact, so nothing resists its motion")
+            jr = (fict[rp.nodes] * (rowsum[rp.nodes] > 0) * arm2).sum()
             rpminv[p, :3] = 1.0 / mt
             rpminv[p, 3:] = 1.0 / max(jr, 1e-300)
             rpradius[p] = np.sqrt(max(jr / mt, 1e-300))
