@@ -132,7 +132,8 @@ def build(params, protocol=S5):
     fnd = add_foundation(model, (0, 0, -0.2), (L, t, 0.2), CONCRETE, element_size=esize)
     hb = params["beam_height"]
     beam_block = add_beam(model, (0, 0, H), (L, t, hb), STEEL, element_size=esize)
-    sim = Simulation(model, SolverOptions(tol=params["tol"], damping=params["damping"]),
+    sim = Simulation(model, SolverOptions(tol=params["tol"], damping=params["damping"],
+                                          progress=params.get("progress", False)),
                      output=params.get("h5"), config=params)
     beam = sim.rigid_point("beam", blocks=[beam_block], position=(0.5 * L, 0.5 * t, H))
     base = sim.node_set("base", plane_nodes(model, 2, 0.0, blocks=[fnd]))
@@ -185,6 +186,7 @@ def main(argv=None, doc=__doc__, defaults=PARAMS, protocol=S5, title="S5 squat w
     if params["fast"]:                  # the preset first, explicit overrides on top
         params = parse_overrides(dict(defaults, **FAST), argv, doc)
     params["h5"] = params["out"] + ".h5"
+    params["progress"] = True
     sim, hist, push = run(params, protocol)
     finish(sim, params["out"], x=hist["beam.ux"][push] / mm, y=hist["beam.fx"][push] / kN,
            xlabel="top displacement (mm)", ylabel="base shear (kN)",
