@@ -6,7 +6,6 @@ history variables, energy audit, guards and output (through ``dr_masonry.results
 """
 from __future__ import annotations
 
-import json
 import time
 from collections import namedtuple
 from dataclasses import asdict, dataclass
@@ -23,6 +22,12 @@ from .kernels.plastic_damage import MS_DC, MS_DISS, MS_DT
 
 Mesh = namedtuple("Mesh", "conn active dN geo wdet h emat mparams s_old s_new fbuf energy ptr rows")
 Cont = namedtuple("Cont", "slave master xi area law lparams gap0 s_old s_new gaps trac fbuf psi ptr rows")
+#: nodal state (n_nodes, 3) unless noted: X reference coordinates m, U displacements m, V velocities
+#: (m per unit fictitious step), minv (n_nodes,) inverse fictitious masses, free 1/0 per DOF, tied
+#: (n_nodes,) reference point or -1, fext constant loads N, P indirect pattern N per unit factor,
+#: fint internal forces N, res out-of-balance N; reference points (n_rp, 6) rpU/rpV/rpminv/rpfree,
+#: rpf applied and rpP pattern generalised forces, rpX (n_rp, 3) m, rpptr/rpnodes CSR of tied
+#: nodes, rpradius (n_rp,) m radius of gyration (moment scale)
 Dyn = namedtuple("Dyn", "X U V minv free tied fext P fint res rpX rpU rpV rpminv rpfree rpf rpP "
                         "rpptr rpnodes rpradius")
 
@@ -670,16 +675,3 @@ class Simulation:
             self.patterns[name] = (stored, stored.P, stored.rpP)
         self.increment = inc
         self.writer.truncate(inc)
-
-
-def config_json(obj):
-    """JSON text of a configuration (dataclasses and arrays included) for the result file."""
-    def default(o):
-        if hasattr(o, "__dataclass_fields__"):
-            return asdict(o)
-        if isinstance(o, np.ndarray):
-            return o.tolist()
-        if isinstance(o, (np.integer, np.floating)):
-            return o.item()
-        return repr(o)
-    return json.dumps(obj, default=default)

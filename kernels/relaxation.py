@@ -20,7 +20,7 @@ never raises the kinetic energy; the reference points' DOFs take part with their
 Arrays are grouped in three named tuples built by ``dr_masonry.solver``:
 ``mesh``: hexahedra (conn, active, dN, geo, wdet, h, emat, mparams, s_old, s_new, fbuf, energy, ptr, rows);
 ``cont``: contact points (slave, master, xi, area, law, lparams, gap0, s_old, s_new, gaps, trac,
-fbuf, psi, ptr, rows); ``dyn``: nodal and reference-point state (see ``SystemArrays`` in the solver).
+fbuf, psi, ptr, rows); ``dyn``: nodal and reference-point state (the ``Dyn`` named tuple in ``dr_masonry.solver``).
 """
 import numpy as np
 
