@@ -1,8 +1,6 @@
 """Long validation runs (``python -m pytest -m slow``): minutes each on 2 cores."""
 import importlib.util
 import os
-
-import numpy as np
 import pytest
 
 HERE = os.path.dirname(__file__)
