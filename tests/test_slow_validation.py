@@ -1,6 +1,7 @@
 """Long validation runs (``python -m pytest -m slow``): minutes each on 2 cores."""
 import importlib.util
 import os
+
 import pytest
 
 HERE = os.path.dirname(__file__)
