@@ -16,15 +16,13 @@ The iteration cap per increment is lowered to ``max_iter`` with ``max_cuts`` hal
 scheme fails in bounded time; a failure is recorded with its message. Run:
 ``python benchmarks/damping.py [key=value ...]``; writes ``benchmarks/out/damping*.csv``.
 """
-import importlib.util
-import os
 import sys
 import time
 import warnings
 
 import numpy as np
 
-from common import ROOT, machine, report  # noqa: I100
+from common import machine, report  # noqa: I100
 
 PARAMS = dict(
     schemes="viscous,fire,kinetic,local",
@@ -46,12 +44,6 @@ PARAMS = dict(
     tag="",                  # suffix of the CSV names (keeps partial runs apart)
 )
 
-
-def load_case(name):
-    spec = importlib.util.spec_from_file_location(name, os.path.join(ROOT, "cases", f"{name}.py"))
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
 
 
 def run_stages(sim, stages, params):
@@ -119,7 +111,7 @@ def wall_push(params, length, height, damping):
 
 def scenes(params, schemes):
     rows = []
-    triplet, wallet = load_case("triplet"), load_case("wallet")
+    from dr_masonry.cases import triplet, wallet
     sim, stages = triplet.build(dict(triplet.PARAMS, increments=1, h5=None), 0.2e6)
     t0 = time.perf_counter()
     sim.run(stages[:1])  # compile or load the kernels before any timing

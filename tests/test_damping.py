@@ -1,8 +1,7 @@
 """FIRE damping (``SolverOptions(damping="fire")``): the compiled iteration against a plain numpy
 FIRE, and the answers of the small scenes and of a linear problem against independent references
 (viscous damping, direct sparse solve)."""
-import importlib.util
-import os
+import importlib
 
 import numpy as np
 import pytest
@@ -12,15 +11,8 @@ from dr_masonry.kernels import relaxation as R
 
 import linear_reference as LR
 
-HERE = os.path.dirname(__file__)
 DOFS = ("x", "y", "z", "rx", "ry", "rz")
 
-
-def load_case(name):
-    spec = importlib.util.spec_from_file_location(name, os.path.join(HERE, "..", "cases", f"{name}.py"))
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
 
 
 def _column(n_blocks=3, H=0.081):
@@ -123,7 +115,7 @@ def test_fire_linear_column_matches_direct_solve():
 
 
 def _peak(case, damping):
-    mod = load_case(case)
+    mod = importlib.import_module(f"dr_masonry.cases.{case}")
     if case == "couplet":
         _, hist = mod.run(dict(mod.PARAMS, increments=30, h5=None, damping=damping))
         return hist["platen.fz"].max() / (mod.L * mod.T)

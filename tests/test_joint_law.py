@@ -411,8 +411,7 @@ def test_drive_joint_validates_path():
 
 
 def test_case_script_writes_outputs(tmp_path):
-    sys.path.insert(0, os.path.join(os.path.dirname(__file__), os.pardir, "cases"))
-    import joint as case
+    from dr_masonry.cases import joint as case
     params = dict(case.PARAMS, steps=200)
     summary = case.run(params, str(tmp_path))
     for name in ("joint_tension.png", "joint_shear.png", "joint_cyclic.png", "joint_tension.csv",

@@ -1,26 +1,14 @@
 """Verification of the solver on the small scenes S1-S3 against closed forms (coarse variants)."""
-import importlib.util
-import os
-
 import numpy as np
 import pytest
 
 from dr_masonry import JointLaw, PlasticDamage, SolverOptions
+from dr_masonry.cases import couplet, triplet, wallet
 from dr_masonry.solver import SolverError
-
-HERE = os.path.dirname(__file__)
-
-
-def load_case(name):
-    spec = importlib.util.spec_from_file_location(name, os.path.join(HERE, "..", "cases", f"{name}.py"))
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
 
 
 def test_couplet_peak_and_energy(tmp_path):
     """S1: peak within 2 % of ft, softening to zero, energy balance within 1 % at every increment."""
-    couplet = load_case("couplet")
     params = dict(couplet.PARAMS, h5=str(tmp_path / "c.h5"))
     sim, hist = couplet.run(params)
     sim.close()
@@ -41,7 +29,6 @@ def test_triplet_peak_and_residual(sigma):
     """S2: peak c + tan(phi) sigma and residual mu sigma; with stiff blocks the joint law alone
     (within 1 %), with the reference bricks progressive failure along the joint lowers the
     average peak by 3-4 % (see docs/validation.md)."""
-    triplet = load_case("triplet")
     law = JointLaw.reference()
     params = dict(triplet.PARAMS, increments=100, h5=None)
     sim, slip, tau = triplet.run(params, sigma)
@@ -53,7 +40,6 @@ def test_triplet_peak_and_residual(sigma):
 
 
 def test_triplet_stiff_blocks_follow_joint_law(monkeypatch):
-    triplet = load_case("triplet")
     monkeypatch.setattr(PlasticDamage, "reference",
                         staticmethod(lambda: PlasticDamage.elastic(480e9, 0.17, 1800.0)))
     law = JointLaw.reference()
@@ -64,7 +50,6 @@ def test_triplet_stiff_blocks_follow_joint_law(monkeypatch):
 
 def test_wallet_passes_peak():
     """S3: peak within 10 % of 6.8 MPa; the run reaches three times the peak strain."""
-    wallet = load_case("wallet")
     params = dict(wallet.PARAMS, shortening=0.006, increments=50, h5=None)
     sim, strain, stress = wallet.run(params)
     k = int(np.argmax(stress))
@@ -84,7 +69,6 @@ def test_unstable_run_stops_with_diagnosis(tmp_path):
     is cut, then the run stops naming the increment and the residual, and the result file written
     so far stays readable (no NaN written)."""
     from dr_masonry.results import open_result
-    couplet = load_case("couplet")
     params = dict(couplet.PARAMS, h5=str(tmp_path / "u.h5"))
     sim, stages = couplet.build(params)
     sim.options.safety = 0.05  # bypasses validation on purpose
@@ -99,7 +83,6 @@ def test_unstable_run_stops_with_diagnosis(tmp_path):
 
 def test_non_finite_state_is_caught(tmp_path):
     """A NaN in the displacement field stops the run with the node and block named."""
-    couplet = load_case("couplet")
     sim, stages = couplet.build(dict(couplet.PARAMS, h5=None))
     sim.build()
     sim.dyn.U[7, 0] = np.nan
@@ -109,7 +92,6 @@ def test_non_finite_state_is_caught(tmp_path):
 
 def test_restart_continues_a_run(tmp_path):
     """A run stopped after stage 1 and resumed from its file ends where an uninterrupted run ends."""
-    couplet = load_case("couplet")
     params = dict(couplet.PARAMS, increments=40)
     sim, stages = couplet.build(dict(params, h5=None))
     whole = sim.run(stages)
@@ -135,7 +117,6 @@ def test_restart_continues_a_run(tmp_path):
 
 def test_energy_warning_when_balance_fails(monkeypatch):
     """The audit says so when the balance error leaves its bound (forced by a tiny bound)."""
-    couplet = load_case("couplet")
     sim, stages = couplet.build(dict(couplet.PARAMS, increments=20, h5=None))
     sim.options.energy_tol = 1e-9
     with pytest.warns(RuntimeWarning, match="energy balance error"):
