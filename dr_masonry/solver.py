@@ -112,6 +112,7 @@ class Simulation:
             detect_contacts(model)
         self.rigid_points = []
         self.node_sets = {}
+        self.contact_reactions = {}
         self._fixed = np.zeros((model.n_nodes, 3), dtype=bool)
         fixed_blocks = np.nonzero(model.block_fixed)[0]
         self._fixed[model.block_nodes(fixed_blocks)] = True
@@ -132,7 +133,27 @@ class Simulation:
         self.node_sets[name] = ns
         return ns
 
+    def contact_reaction(self, name, blocks, support):
+        """Record the force (N, global axes) that the blocks ``support`` exert through their joints
+        on the blocks ``blocks`` (history ``<name>.fx/fy/fz``; the sign of a node-set reaction:
+        a wall standing on a foundation gives a positive ``fz``).
+
+        Splits the reaction of one support (a foundation under several walls) by wall, exactly:
+        the joint forces are summed per contact, whatever the meshes of the two sides.
+        """
+        self._check_name(name)
+        c = self.model.contacts
+        a = np.isin(c.blocks, np.asarray(blocks, dtype=np.int64))
+        b = np.isin(c.blocks, np.asarray(support, dtype=np.int64))
+        on_slave = a[:, 1] & b[:, 0]    # support is the slave side of these contacts
+        on_master = a[:, 0] & b[:, 1]
+        if not (on_slave.any() or on_master.any()):
+            raise L.LoadingError(f"contact reaction {name!r}: no joint between the two block sets")
+        self.contact_reactions[name] = (np.nonzero(on_slave)[0], np.nonzero(on_master)[0])
+
     def _check_name(self, name):
+        if name in self.contact_reactions:
+            raise L.LoadingError(f"a contact reaction named {name!r} exists already")
         if name in self.node_sets or any(rp.name == name for rp in self.rigid_points):
             raise L.LoadingError(f"a node set or rigid point named {name!r} exists already; names "
                                  f"identify controls in the history and on restart")
@@ -573,6 +594,11 @@ class Simulation:
         for (name, k), (nodes, kk) in self.presc.items():
             row[f"{name}.u{'xyz'[k]}"] = float(d.U[nodes, k].mean())
             row[f"{name}.f{'xyz'[k]}"] = float((d.fint[nodes, k] - d.fext[nodes, k]).sum())
+        fb = cont.fbuf.reshape(-1, 5, 3)
+        for name, (sl, ms) in self.contact_reactions.items():
+            f = fb[sl, 0].sum(axis=0) + fb[ms, 1:].sum(axis=(0, 1))
+            for k in range(3):
+                row[f"{name}.f{'xyz'[k]}"] = float(f[k])
         for key, v in row.items():
             self.history.setdefault(key, [np.nan] * (self.increment - 1)).append(float(v))
         self._audit(row)

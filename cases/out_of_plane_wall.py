@@ -1,0 +1,140 @@
+"""S6 out-of-plane wall: two-way bending of a 3.874 x 2.765 m wall under airbag pressure (COMP-11).
+
+A 3.874 m long x 2.765 m high (34 courses) x 0.102 m running-bond wall of 220 x 81 x 102 mm bricks
+on a fixed foundation block, a stiff steel beam on its top course, the joints of the calibrated
+masonry law (also against the foundation and the beam). Supports of a two-way spanning wall:
+
+* the beam carries the pre-compression (0.05 MPa x plan area with the self-weight, as in the S5
+  rig) and holds the top against out-of-plane motion (beam ``x``, ``y``, ``ry``, ``rz`` held,
+  ``rx`` free: a line support, around which the top joint may open);
+* the nodes of both vertical edges (``x = 0`` and ``x = L``) are held in ``y``;
+* the foundation is fixed.
+
+Stage ``push``: a uniform pressure on the face ``y = 0`` of every wall brick (the airbag) whose
+magnitude is the unknown of an indirect displacement control of the out-of-plane (``y``)
+displacement of the node nearest the centre of the loaded face: monotonic to 40 mm
+(``protocol=monotonic``) or the cyclic amplitudes 2, 5, 10, 15, 20, 30 mm, one cycle each
+(``protocol=cyclic``, :data:`dr_masonry.protocols.S6`; negative pressure = suction of the
+reversed airbag). Output: total lateral force (pressure x loaded area) against the centre
+displacement.
+
+Reference (paper Fig. 20, after Graziotti et al. 2016): diagonal cracks running from the corners to
+the centre and horizontal cracks at the base, at mid-height and at the top; the peak is followed
+by a gentle softening, since the edges keep the cracked panel in two-way action.
+
+Run: ``python cases/out_of_plane_wall.py [key=value ...]`` (or ``dr-masonry run
+out_of_plane_wall``); ``mesh=coarse`` is one hexahedron per brick; ``fast=true`` runs a
+0.88 x 0.81 m wall in a few increments (test suite).
+"""
+import sys
+
+import numpy as np
+
+from dr_masonry import Displacement, Indirect, JointLaw, PlasticDamage, Pressure, Stage
+from dr_masonry.cases import squat_wall
+from dr_masonry.geometry import plane_nodes
+from dr_masonry.params import parse_overrides
+from dr_masonry.protocols import S6
+from dr_masonry.scene import finish
+from dr_masonry.units import MPa, kN, mm
+
+PARAMS = dict(
+    length=3.874,           # wall length, m (rounded down to whole half bricks)
+    height=2.765,           # wall height, m (rounded to whole 81 mm courses)
+    sigma=0.05 * MPa,       # vertical pre-compression on the wall's top, Pa
+    protocol="monotonic",   # monotonic | cyclic
+    target=S6.monotonic,    # monotonic target of the centre displacement, m
+    increments=40,          # increments of the monotonic push
+    grading=1.5,            # monotonic: i-th target = target * (i / increments) ** grading
+    step=1.0 * mm,          # cyclic: largest displacement per increment, m
+    n_amplitudes=0,         # cyclic: run only the first n amplitudes (0: all)
+    pre_increments=4,       # increments of the pre-compression stage
+    mesh="coarse",          # coarse (1 x 1 x 1 hexahedra per brick) | fine (4 x 1 x 2)
+    gravity=True,
+    beam_height=0.20,       # steel loading beam height, m
+    tol=1e-4,
+    damping="viscous",
+    frames=5,               # write a field frame every this many increments
+    fast=False,             # preset FAST: tiny 0.88 x 0.81 m coarse wall, few increments
+    out="results/out_of_plane_wall",
+)
+#: overrides of ``fast=true``: a 4 x 10 brick wall, a few increments (seconds)
+FAST = dict(length=0.88, height=0.81, mesh="coarse", target=3 * mm, increments=6,
+            pre_increments=2, step=1.0 * mm, n_amplitudes=2)
+#: history columns of the curve (for studies): centre displacement, total lateral force
+CURVE = dict(x="centre.uy", y="lateral_force", stage="push", xscale=1e3, yscale=1e-3,
+             xlabel="centre displacement (mm)", ylabel="lateral force (kN)")
+
+
+def build(params):
+    """Model and stages. Sets ``sim.wall``, ``sim.centre`` (node set of the control node) and
+    ``sim.loaded_area`` (m^2, area of the pressurised face)."""
+    kind = squat_wall._choice(params, "protocol", ("monotonic", "cyclic"))
+    sim, wall, beam, base, pre = squat_wall.rig(params, JointLaw.reference(),
+                                                PlasticDamage.reference())
+    model = sim.model
+    L, t, H = wall.length, wall.thickness, wall.height
+    bricks = [b for c in wall.courses for b in c]
+    quads = np.concatenate([model.block_face(b, 2)[1] for b in bricks])  # faces y = 0
+    airbag = Pressure(quads, name="airbag")
+    face = plane_nodes(model, 1, 0.0, blocks=bricks)  # the control node must carry pressure
+    d2 = (model.nodes[face, 0] - 0.5 * L) ** 2 + (model.nodes[face, 2] - 0.5 * H) ** 2
+    sim.centre = sim.node_set("centre", face[[int(np.argmin(d2))]])
+    edges = np.concatenate([plane_nodes(model, 0, 0.0, blocks=bricks),
+                            plane_nodes(model, 0, L, blocks=bricks)])
+    sim.node_set("edges", edges)
+    pre += [Displacement(target=beam, dof=d, to=0.0) for d in ("x", "y", "ry", "rz")]
+    pre.append(Displacement(target=sim.node_sets["edges"], dof="y", to=0.0))
+    if kind == "monotonic":
+        path = S6.monotonic_path(params["increments"], target=params["target"],
+                                 grading=params["grading"])
+    else:
+        path = S6.path(step=params["step"], n_amplitudes=params["n_amplitudes"] or None)
+    stages = [Stage("precompression", params["pre_increments"], pre,
+                    frames=params["pre_increments"]),
+              Stage("push", path.size, [Indirect(pattern=airbag, target=sim.centre, dof="y",
+                                                 path=path, name="airbag")],
+                    frames=params["frames"])]
+    sim.wall = wall
+    x = model.nodes[quads]
+    sim.loaded_area = float(0.5 * np.linalg.norm(np.cross(x[:, 2] - x[:, 0], x[:, 3] - x[:, 1]),
+                                                  axis=1).sum())
+    return sim, stages
+
+
+def run(params):
+    """Run; returns (simulation, history with a ``lateral_force`` column (N), push mask)."""
+    sim, stages = build(params)
+    hist = sim.run(stages)
+    push = hist["increment"] > stages[0].increments
+    hist["lateral_force"] = np.where(push, hist["lambda"] * sim.loaded_area, 0.0)
+    return sim, hist, push
+
+
+def report(sim, hist, push):
+    """One-line summary: peak lateral force and pressure, damage, iterations per increment."""
+    F, u = hist["lateral_force"][push], hist["centre.uy"][push]
+    k = int(np.argmax(np.abs(F)))
+    return (f"peak lateral force {F[k] / kN:.2f} kN ({F[k] / sim.loaded_area / 1e3:.2f} kPa) at "
+            f"centre displacement {u[k] / mm:.2f} mm; max joint damage "
+            f"{hist['max_joint_damage'][-1]:.2f}, block dt {hist['max_dt'][-1]:.2f}; iterations per "
+            f"increment {np.mean(hist['iterations'][push]):.0f} (max "
+            f"{np.max(hist['iterations'][push]):.0f}); relaxation time {np.sum(hist['time_s']):.1f} s")
+
+
+def main(argv=None):
+    argv = sys.argv[1:] if argv is None else argv
+    params = parse_overrides(PARAMS, argv, __doc__)
+    if params["fast"]:
+        params = parse_overrides(dict(PARAMS, **FAST), argv, __doc__)
+    params["h5"] = params["out"] + ".h5"
+    params["progress"] = True
+    sim, hist, push = run(params)
+    finish(sim, params["out"], x=hist["centre.uy"][push] / mm,
+           y=hist["lateral_force"][push] / kN, xlabel="centre displacement (mm)",
+           ylabel="lateral force (kN)", title=f"S6 out-of-plane wall, {params['protocol']}")
+    print(report(sim, hist, push))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,177 @@
+"""S7 terraced house: quasi-static pushover of a two-storey masonry house (paper Sec. 5.3).
+
+A parametric two-storey house after the TU Delft full-scale calcium-silicate test (Esposito et
+al. 2019; paper Fig. 9), built by :func:`dr_masonry.geometry.terraced_house` (dimensions in
+:class:`~dr_masonry.geometry.HouseParams`): two transversal (party) walls carry two floors of
+precast concrete slabs; the front facade has one large opening per storey between a wide
+(1.1 m) and a narrow (0.6 m) pier, toothed into the transversal walls. Half model by symmetry:
+the mid-plane ``y = depth / 2`` (parallel to the facade and to the load) holds ``u_y = 0``; each
+floor's slab is tied to a reference point (``floor1``, ``floor2``) whose ``y``, ``rx``, ``rz`` are
+held by the symmetry. Masonry: the calibrated bricks and joints of MODEL.md section 4; slabs,
+lintels and foundation elastic concrete (slab density scaled so that the slabs, rounded to whole
+courses, weigh as 0.2 m slabs).
+
+* stage ``gravity``: self-weight;
+* stage ``push``: equal horizontal forces along the facade (``x``) at the two floors, their
+  magnitude the unknown of an indirect displacement control of the top floor's ``x``
+  displacement: monotonic to ``direction`` x 60 mm (``protocol=monotonic``) or the reduced
+  cyclic protocol +/-2.5, 5, 10, 20, 30, 40, 50, 60 mm, one cycle each (``protocol=cyclic``,
+  :data:`dr_masonry.protocols.S7`).
+
+Output: base shear of the whole house (2 x the half model's: twice the floor force, two floors)
+against the top-floor displacement (total reactions ``base.f*``); the vertical reaction of each wall and pier
+(``base_W1.fz``, ``base_W2.fz``, ``base_P1.fz`` wide pier, ``base_P2.fz`` narrow pier, half model,
+N) against it (paper Fig. 26); crack maps of the facade and the transversal walls.
+
+Reference (paper Figs. 22-26): in the positive direction (towards the narrow pier) a shear/
+vertical crack opens in the wide pier, in the negative direction the piers rock; the peak base
+shear differs between the directions; as the house sways, the vertical load moves between the
+transversal walls and the piers (Fig. 26). The paper's implicit monotonic run took 2 h 09 min on
+a 2-core laptop.
+
+Run: ``python cases/terraced_house.py [key=value ...]`` (or ``dr-masonry run terraced_house``).
+``mesh=coarse`` (default: one hexahedron per brick) or ``mesh=fine`` (4 x 1 x 2 per brick);
+``fast=true`` runs a small coarse house of large blocks in a few increments (test suite).
+"""
+import sys
+from dataclasses import replace
+
+import numpy as np
+
+from dr_masonry import (Combined, Displacement, Indirect, JointLaw, Load, Model, PlasticDamage,
+                        PointLoad, Simulation, SolverOptions, Stage)
+from dr_masonry.geometry import BrickSpec, HouseParams, terraced_house
+from dr_masonry.loading import Gravity
+from dr_masonry.params import ParameterError, parse_overrides
+from dr_masonry.protocols import S7
+from dr_masonry.scene import finish
+from dr_masonry.units import kN, mm
+
+PARAMS = dict(
+    direction=1,            # +1: push towards the narrow pier (+x), -1: towards the wide pier
+    protocol="monotonic",   # monotonic | cyclic
+    target=S7.monotonic,    # monotonic target of the top-floor displacement, m
+    increments=30,          # increments of the monotonic push
+    grading=1.5,            # monotonic: i-th target = target * (i / increments) ** grading
+    step=2.5 * mm,          # cyclic: largest displacement per increment, m
+    n_amplitudes=0,         # cyclic: run only the first n amplitudes (0: all)
+    gravity_increments=4,
+    mesh="coarse",          # coarse (1 x 1 x 1 hexahedra per brick) | fine (4 x 1 x 2)
+    slab_element=0.22,      # slab and foundation hexahedron size in plan, m
+    tol=1e-4,
+    damping="viscous",
+    frames=5,               # write a field frame every this many increments
+    fast=False,             # preset FAST: small coarse house of large blocks, few increments
+    out="results/terraced_house",
+)
+#: overrides of ``fast=true``
+FAST = dict(mesh="tiny", target=3 * mm, increments=5, gravity_increments=2, step=2.0 * mm,
+            n_amplitudes=1, slab_element=0.44)
+#: history columns of the curve (for studies): top-floor displacement, base shear (half model)
+CURVE = dict(x="floor2.ux", y="lambda", stage="push", xscale=1e3, yscale=4e-3,  # kN of the whole house: 2 floors x 2 halves
+             xlabel="top displacement (mm)", ylabel="base shear, whole house (kN)")
+
+CONCRETE = PlasticDamage.elastic(30e9, 0.2, 2400.0)
+MESHES = {"coarse": BrickSpec(nx_along=1, nz_height=1, ny_thick=1), "fine": BrickSpec()}
+#: reactions of the foundation on each wall and pier (paper Fig. 26): history name -> block group
+REACTIONS = {"base_P1": "pier_wide", "base_P2": "pier_narrow", "base_W1": "transversal_wall_1",
+             "base_W2": "transversal_wall_2"}
+
+
+def house_params(params):
+    """The :class:`HouseParams` of a mesh choice (``tiny``: the scaled smoke-test house)."""
+    mesh = params["mesh"]
+    if mesh == "tiny":
+        return replace(HouseParams().scaled(coarse=True), slab_element=params["slab_element"])
+    if mesh not in MESHES:
+        raise ParameterError(f"parameter mesh={mesh!r}: valid values are "
+                             f"{list(MESHES) + ['tiny']}")
+    return HouseParams(brick=MESHES[mesh], slab_element=params["slab_element"])
+
+
+def build(params):
+    """Model and stages. Sets ``sim.groups`` (the generator's block groups), ``sim.floors`` (the
+    slab reference points, bottom first) and ``sim.house`` (the HouseParams)."""
+    if params["direction"] not in (1, -1):
+        raise ParameterError(f"parameter direction={params['direction']!r}: must be 1 or -1")
+    if params["protocol"] not in ("monotonic", "cyclic"):
+        raise ParameterError(f"parameter protocol={params['protocol']!r}: valid values are "
+                             f"['monotonic', 'cyclic']")
+    hp = house_params(params)
+    lay = hp.layout()
+    model = Model()
+    model.set_joint_law(JointLaw.reference())
+    slab = CONCRETE.with_changes(density=CONCRETE.density * hp.slab_thickness / lay.slab_thickness)
+    groups = terraced_house(model, hp, PlasticDamage.reference(), CONCRETE, slab)
+    sim = Simulation(model, SolverOptions(tol=params["tol"], damping=params["damping"],
+                                          progress=params.get("progress", False)),
+                     output=params.get("h5"), config=params)
+    floors = [sim.rigid_point(f"floor{i + 1}", blocks=groups[f"slabs_floor{i + 1}"])
+              for i in range(hp.n_storeys)]
+    tied = np.concatenate([f.nodes for f in floors])
+    sym = np.setdiff1d(groups["symmetry_nodes"], tied)
+    sim.fix(sym, "y")
+    pre = [Load(pattern=Gravity(), to=1.0)]
+    for f in floors:
+        pre += [Displacement(target=f, dof=d, to=0.0) for d in ("y", "rx", "rz")]
+    fnd = groups["foundation"]
+    ids = model.block_nodes(fnd)
+    base = sim.node_set("base", ids[np.isclose(model.nodes[ids, 2], 0.0)])
+    pre += [Displacement(target=base, dof=d, to=0.0) for d in "xyz"]
+    for name, group in REACTIONS.items():
+        sim.contact_reaction(name, groups[group], fnd)
+    pattern = Combined([(PointLoad(f, "x", 1.0, name=f"{f.name}_x"), 1.0) for f in floors],
+                       name="floors")
+    if params["protocol"] == "monotonic":
+        path = params["direction"] * S7.monotonic_path(params["increments"],
+                                                       target=params["target"],
+                                                       grading=params["grading"])
+    else:
+        path = S7.path(step=params["step"], n_amplitudes=params["n_amplitudes"] or None,
+                       start_negative=params["direction"] < 0)
+    stages = [Stage("gravity", params["gravity_increments"], pre,
+                    frames=params["gravity_increments"]),
+              Stage("push", path.size, [Indirect(pattern=pattern, target=floors[-1], dof="x",
+                                                 path=path, name="push")],
+                    frames=params["frames"])]
+    sim.groups, sim.floors, sim.house = groups, floors, hp
+    return sim, stages
+
+
+def run(params):
+    """Run; returns (simulation, history with ``base_shear`` (N, whole house), push mask)."""
+    sim, stages = build(params)
+    hist = sim.run(stages)
+    push = hist["increment"] > stages[0].increments
+    hist["base_shear"] = np.where(push, 2.0 * len(sim.floors) * hist["lambda"], 0.0)
+    return sim, hist, push
+
+
+def report(sim, hist, push):
+    """One-line summary: peak base shear, damage, iterations per increment."""
+    V, u = hist["base_shear"][push], hist[f"{sim.floors[-1].name}.ux"][push]
+    k = int(np.argmax(np.abs(V)))
+    return (f"peak base shear (whole house) {V[k] / kN:.1f} kN at top displacement "
+            f"{u[k] / mm:.2f} mm; max joint damage {hist['max_joint_damage'][-1]:.2f}, block dt "
+            f"{hist['max_dt'][-1]:.2f}, dc {hist['max_dc'][-1]:.2f}; iterations per increment "
+            f"{np.mean(hist['iterations'][push]):.0f} (max {np.max(hist['iterations'][push]):.0f});"
+            f" relaxation time {np.sum(hist['time_s']):.1f} s")
+
+
+def main(argv=None):
+    argv = sys.argv[1:] if argv is None else argv
+    params = parse_overrides(PARAMS, argv, __doc__)
+    if params["fast"]:
+        params = parse_overrides(dict(PARAMS, **FAST), argv, __doc__)
+    params["h5"] = params["out"] + ".h5"
+    params["progress"] = True
+    sim, hist, push = run(params)
+    top = f"{sim.floors[-1].name}.ux"
+    finish(sim, params["out"], x=hist[top][push] / mm, y=hist["base_shear"][push] / kN,
+           xlabel="top displacement (mm)", ylabel="base shear, whole house (kN)",
+           title=f"S7 terraced house, {params['protocol']}, direction {params['direction']:+d}")
+    print(report(sim, hist, push))
+
+
+if __name__ == "__main__":
+    main()
