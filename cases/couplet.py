@@ -28,6 +28,9 @@ PARAMS = dict(
     out="results/couplet",
 )
 L, H, T = 0.22, 0.081, 0.102
+#: the response curve (dr_masonry.study): joint tensile stress (MPa) against opening (mm)
+CURVE = dict(x="platen.uz", y="platen.fz", stage=None, xscale=1 / mm,
+             yscale=1 / (L * T * MPa), xlabel="opening (mm)", ylabel="tensile stress (MPa)")
 
 
 def build(params):

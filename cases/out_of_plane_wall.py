@@ -12,7 +12,8 @@ masonry law (also against the foundation and the beam). Supports of a two-way sp
 
 Stage ``push``: a uniform pressure on the face ``y = 0`` of every wall brick (the airbag) whose
 magnitude is the unknown of an indirect displacement control of the out-of-plane (``y``)
-displacement of the node nearest the centre of the loaded face: monotonic to 40 mm
+displacement of the node nearest the centre of the loaded face (the load factor ``lambda`` is
+the total force, N): monotonic to 40 mm
 (``protocol=monotonic``) or the cyclic amplitudes 2, 5, 10, 15, 20, 30 mm, one cycle each
 (``protocol=cyclic``, :data:`dr_masonry.protocols.S6`; negative pressure = suction of the
 reversed airbag). Output: total lateral force (pressure x loaded area) against the centre
@@ -30,7 +31,8 @@ import sys
 
 import numpy as np
 
-from dr_masonry import Displacement, Indirect, JointLaw, PlasticDamage, Pressure, Stage
+from dr_masonry import (Combined, Displacement, Indirect, JointLaw, PlasticDamage, Pressure,
+                        Stage)
 from dr_masonry.cases import squat_wall
 from dr_masonry.geometry import plane_nodes
 from dr_masonry.params import parse_overrides
@@ -62,7 +64,7 @@ PARAMS = dict(
 FAST = dict(length=0.88, height=0.81, mesh="coarse", target=3 * mm, increments=6,
             pre_increments=2, step=1.0 * mm, n_amplitudes=2)
 #: history columns of the curve (for studies): centre displacement, total lateral force
-CURVE = dict(x="centre.uy", y="lateral_force", stage="push", xscale=1e3, yscale=1e-3,
+CURVE = dict(x="centre.uy", y="lambda", stage="push", xscale=1e3, yscale=1e-3,
              xlabel="centre displacement (mm)", ylabel="lateral force (kN)")
 
 
@@ -76,7 +78,11 @@ def build(params):
     L, t, H = wall.length, wall.thickness, wall.height
     bricks = [b for c in wall.courses for b in c]
     quads = np.concatenate([model.block_face(b, 2)[1] for b in bricks])  # faces y = 0
-    airbag = Pressure(quads, name="airbag")
+    x = model.nodes[quads]
+    sim.loaded_area = float(0.5 * np.linalg.norm(np.cross(x[:, 2] - x[:, 0], x[:, 3] - x[:, 1]),
+                                                  axis=1).sum())
+    # factor 1 = 1 N in all: the load factor is the total lateral force
+    airbag = Combined([(Pressure(quads, name="pressure"), 1.0 / sim.loaded_area)], name="airbag")
     face = plane_nodes(model, 1, 0.0, blocks=bricks)  # the control node must carry pressure
     d2 = (model.nodes[face, 0] - 0.5 * L) ** 2 + (model.nodes[face, 2] - 0.5 * H) ** 2
     sim.centre = sim.node_set("centre", face[[int(np.argmin(d2))]])
@@ -96,9 +102,6 @@ def build(params):
                                                  path=path, name="airbag")],
                     frames=params["frames"])]
     sim.wall = wall
-    x = model.nodes[quads]
-    sim.loaded_area = float(0.5 * np.linalg.norm(np.cross(x[:, 2] - x[:, 0], x[:, 3] - x[:, 1]),
-                                                  axis=1).sum())
     return sim, stages
 
 
@@ -107,7 +110,7 @@ def run(params):
     sim, stages = build(params)
     hist = sim.run(stages)
     push = hist["increment"] > stages[0].increments
-    hist["lateral_force"] = np.where(push, hist["lambda"] * sim.loaded_area, 0.0)
+    hist["lateral_force"] = np.where(push, hist["lambda"], 0.0)
     return sim, hist, push
 
 

@@ -24,6 +24,7 @@ from dr_masonry.units import MPa, mm
 PARAMS = dict(squat_wall.PARAMS, length=1.10, height=2.75, sigma=0.52 * MPa, bc="double_clamped",
               drift=S4.monotonic, increments=40, step=1.0 * mm, out="results/slender_wall")
 FAST = squat_wall.FAST
+CURVE = squat_wall.CURVE
 
 
 def build(params):

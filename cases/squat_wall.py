@@ -70,6 +70,9 @@ PARAMS = dict(
 #: overrides of ``fast=true``: a 4 x 10 brick wall, a few increments (seconds)
 FAST = dict(length=0.88, height=0.81, mesh="coarse", drift=0.2, increments=20, grading=1.5,
             pre_increments=2, step=0.4 * mm, n_amplitudes=2)
+#: the response curve (dr_masonry.study): base shear (kN) against top displacement (mm) of the push
+CURVE = dict(x="beam.ux", y="beam.fx", stage="push", xscale=1 / mm, yscale=1 / kN,
+             xlabel="top displacement (mm)", ylabel="base shear (kN)")
 
 STEEL = PlasticDamage.elastic(210e9, 0.3, 7850.0)       # loading beam
 CONCRETE = PlasticDamage.elastic(30e9, 0.2, 2400.0)     # foundation (fixed)
@@ -108,20 +111,19 @@ def materials(variant="reference", shear_damage="calibrated"):
     return law, block
 
 
-def build(params, protocol=S5):
-    """Model and stages of an in-plane wall test (S5 squat wall; S4 uses ``protocol=S4``).
+def rig(params, law, block):
+    """A wall on a fixed foundation under a stiff steel loading beam (S4, S5, S6).
 
-    Sets ``sim.wall`` (the :class:`~dr_masonry.geometry.Wall`), ``sim.beam`` (the loading beam's
-    reference point), ``sim.n_top`` (N, vertical force on the wall's top) and ``sim.weight_wall``
-    (N, the wall's self-weight, 0 without gravity).
+    Uses ``length``, ``height``, ``mesh``, ``beam_height``, ``gravity``, ``sigma``, ``tol``,
+    ``damping`` of ``params``. Returns ``(sim, wall, beam, base, pre)``: the simulation, the
+    :class:`~dr_masonry.geometry.Wall`, the beam's reference point (centre of the wall's top face),
+    the foundation's top-face node set (reactions ``base.f*``) and the pre-compression controls
+    (gravity and the force ``N`` that makes the top of the wall carry ``sigma`` x plan area, the
+    beam's weight subtracted; the base held). Sets ``sim.n_top`` and ``sim.weight_wall`` (N).
     """
-    bc = _choice(params, "bc", ("cantilever", "double_clamped"))
-    kind = _choice(params, "protocol", ("monotonic", "cyclic"))
-    brick = MESHES[_choice(params, "mesh", tuple(MESHES))]
-    _choice(params, "shear_damage", ("calibrated", "paper"))
     if not params["sigma"] >= 0:
         raise ParameterError(f"parameter sigma={params['sigma']!r}: must be >= 0 Pa (compression)")
-    law, block = materials(params["variant"], params["shear_damage"])
+    brick = MESHES[_choice(params, "mesh", tuple(MESHES))]
     model = Model()
     model.set_joint_law(law)
     courses = max(1, int(round(params["height"] / brick.height)))
@@ -144,13 +146,29 @@ def build(params, protocol=S5):
     if sim.n_top < weight_beam:
         raise ParameterError(f"parameter sigma={params['sigma']!r} Pa: the beam's weight alone "
                              f"({weight_beam / (L * t):.4g} Pa) exceeds the pre-compression")
-    held = ("y", "rx", "rz") + (("ry",) if bc == "double_clamped" else ())
-    pre = [Force(target=beam, dof="z", to=-(sim.n_top - weight_beam), name="N"),
-           Displacement(target=beam, dof="x", to=0.0, name="push")]
-    pre += [Displacement(target=beam, dof=d, to=0.0) for d in held]
+    pre = [Force(target=beam, dof="z", to=-(sim.n_top - weight_beam), name="N")]
     pre += [Displacement(target=base, dof=d, to=0.0) for d in "xyz"]
     if params["gravity"]:
         pre.append(Load(pattern=g, to=1.0))
+    return sim, wall, beam, base, pre
+
+
+def build(params, protocol=S5):
+    """Model and stages of an in-plane wall test (S5 squat wall; S4 uses ``protocol=S4``).
+
+    Sets ``sim.wall`` (the :class:`~dr_masonry.geometry.Wall`), ``sim.beam`` (the loading beam's
+    reference point), ``sim.n_top`` (N, vertical force on the wall's top) and ``sim.weight_wall``
+    (N, the wall's self-weight, 0 without gravity).
+    """
+    bc = _choice(params, "bc", ("cantilever", "double_clamped"))
+    kind = _choice(params, "protocol", ("monotonic", "cyclic"))
+    _choice(params, "shear_damage", ("calibrated", "paper"))
+    law, block = materials(params["variant"], params["shear_damage"])
+    sim, wall, beam, base, pre = rig(params, law, block)
+    held = ("y", "rx", "rz") + (("ry",) if bc == "double_clamped" else ())
+    pre += [Displacement(target=beam, dof="x", to=0.0, name="push")]
+    pre += [Displacement(target=beam, dof=d, to=0.0) for d in held]
+    H = wall.height
     if kind == "monotonic":
         path = protocol.monotonic_path(params["increments"], H, params["drift"], params["grading"])
     else:

@@ -17,7 +17,7 @@ from dr_masonry import Displacement, JointLaw, Model, PlasticDamage, Simulation,
 from dr_masonry.geometry import BrickSpec, add_wall, plane_nodes
 from dr_masonry.params import parse_overrides
 from dr_masonry.scene import finish
-from dr_masonry.units import MPa, mm
+from dr_masonry.units import MPa, kN, mm
 
 PARAMS = dict(
     shortening=12.0 * mm,   # final platen displacement, m
@@ -27,6 +27,10 @@ PARAMS = dict(
     damping="viscous",
     out="results/wallet",
 )
+#: the response curve (dr_masonry.study): platen force against shortening, compression positive
+#: (the stress and strain of ``run`` divide by the wallet's area and height)
+CURVE = dict(x="platen.uz", y="platen.fz", stage=None, xscale=-1 / mm, yscale=-1 / kN,
+             xlabel="platen shortening (mm)", ylabel="platen force (kN)")
 
 
 def build(params):

@@ -1,6 +1,7 @@
-"""Command line: ``dr-masonry run | vtk | info | list`` (also ``python -m dr_masonry``).
+"""Command line: ``dr-masonry run | study | vtk | info | list`` (also ``python -m dr_masonry``).
 
 ``run <case> [key=value ...]``  run ``dr_masonry.cases.<case>`` with parameter overrides
+``study <case> [--vary key=v1,v2 ...] [--set key=value ...]``  a parameter study through Dask
 ``vtk <result.h5> [out_dir]``   write the VTK time series (.vtu + .pvd)
 ``info <result.h5> [--peak KEY ...]``  model size, configuration, increments, frames, last row
 ``list``                        the cases available
@@ -45,6 +46,32 @@ def _cmd_run(args):
         raise ParameterError(f"case {name!r} has no main(argv)")
     rc = mod.main(list(args.overrides))
     return rc if isinstance(rc, int) else 0
+
+
+def _key_value(opt, spec):
+    key, sep, text = spec.partition("=")
+    if not sep or not key.strip() or not text.strip():
+        raise ParameterError(f"{opt} {spec!r}: expected key=value")
+    return key.strip(), text.strip()
+
+
+def _cmd_study(args):
+    from .study import grid, run_study
+    axes, base = {}, {}
+    for spec in args.vary:
+        key, text = _key_value("--vary", spec)
+        if key in axes:
+            raise ParameterError(f"--vary {key}: given twice")
+        axes[key] = [v.strip() for v in text.split(",") if v.strip()]
+    for spec in args.set:
+        key, text = _key_value("--set", spec)
+        if key in axes:
+            raise ParameterError(f"parameter {key!r} is both varied (--vary) and set (--set)")
+        base[key] = text
+    res = run_study(args.case, grid(**axes), base=base,
+                    out=args.out or f"results/study_{args.case}", scheduler=args.scheduler,
+                    n_workers=args.workers, threads_per_worker=args.threads)
+    return 1 if res.failed else 0
 
 
 def _cmd_vtk(args):
@@ -97,6 +124,28 @@ def _parser():
     s.add_argument("case")
     s.add_argument("overrides", nargs=argparse.REMAINDER)
     s.set_defaults(func=_cmd_run)
+    s = sub.add_parser("study", help="run a case once per parameter variant (Dask); one CSV "
+                       "table and one overlay plot; exit status 1 if a variant failed",
+                       description="Run a case once per combination of the --vary values "
+                       "(cartesian product), with the --set values in every run, as Dask tasks. "
+                       "Values convert to the type of the case's defaults (dr-masonry run <case> "
+                       "--help lists them). Writes <out>/<label>.h5 per variant, <out>/study.csv "
+                       "and <out>/study.png.")
+    s.add_argument("case")
+    s.add_argument("--vary", action="append", default=[], metavar="KEY=V1,V2,...",
+                   help="an axis of the grid (repeatable)")
+    s.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="a parameter of every variant (repeatable)")
+    s.add_argument("--scheduler", metavar="ADDR",
+                   help="address of a running Dask scheduler (tcp://host:8786), or 'synchronous' "
+                   "(no Dask, one run after another here); default: local worker processes")
+    s.add_argument("--workers", type=int, metavar="N",
+                   help="local worker processes (default: cores / threads, at most one per "
+                   "variant)")
+    s.add_argument("--threads", type=int, default=1, metavar="N",
+                   help="Numba threads per run (default 1)")
+    s.add_argument("--out", metavar="DIR", help="study directory (default results/study_<case>)")
+    s.set_defaults(func=_cmd_study)
     s = sub.add_parser("vtk", help="write the VTK time series of a results file")
     s.add_argument("result")
     s.add_argument("out_dir", nargs="?")
