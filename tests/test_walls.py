@@ -7,10 +7,11 @@ import math
 import numpy as np
 import pytest
 
-from dr_masonry import JointLaw, PlasticDamage
+from dr_masonry import JointLaw, PlasticDamage, cyclic_path
 from dr_masonry.cases import slender_wall, squat_wall
 from dr_masonry.loading import LoadingError
 from dr_masonry.params import ParameterError
+from dr_masonry.postprocess import PostprocessError, cycle_bounds, energy_per_cycle
 from dr_masonry.protocols import PROTOCOLS, S4, S5
 
 L, T, NC, HC = 0.88, 0.102, 10, 0.081
@@ -150,6 +151,32 @@ def test_slender_cyclic_reversal(slender_cyclic):
     assert np.abs(v).max() < 2 * (n_base * L / 2 + LAW.ft * T * L ** 2 / 2) / H
     assert np.all(np.abs(hist["balance_error"]) < 0.01)
     assert np.all(np.abs(hist["beam.ury"]) < 1e-12)   # rotation held
+
+
+def test_energy_per_cycle(slender_cyclic):
+    """Two amplitudes, two cycles each: four cycles, each dissipating a non-negative energy,
+    together everything dissipated during the push; the larger amplitude dissipates more."""
+    sim, hist, push = slender_cyclic
+    cycles = energy_per_cycle(hist, "beam.ux", push)
+    assert [c["cycle"] for c in cycles] == [1, 2, 3, 4]
+    amp = S4.amplitudes_m(H)[:2]
+    assert [c["amplitude"] for c in cycles] == pytest.approx([amp[0]] * 2 + [amp[1]] * 2)
+    d = np.array([c["D_total"] for c in cycles])
+    assert np.all(d >= -1e-9 * d.max()) and d.max() > 0
+    first = np.flatnonzero(push)[0]
+    total = (hist["D_blocks"] + hist["D_joints"])[-1] - (hist["D_blocks"] + hist["D_joints"])[first - 1]
+    assert d.sum() == pytest.approx(total, rel=1e-12)
+    assert min(d[2:]) > max(d[:2])
+
+
+def test_cycle_bounds_of_protocols():
+    u = cyclic_path([1.0, 2.0], 2, 3)
+    b = cycle_bounds(u)
+    assert len(b) == 4 and b[0][0] == 0 and b[-1][1] == u.size
+    assert all(np.abs(u[s:e]).max() == a for (s, e), a in zip(b, [1, 1, 2, 2]))
+    assert len(cycle_bounds(cyclic_path([1.0], 3, 2, start_negative=True))) == 3
+    with pytest.raises(PostprocessError):
+        cycle_bounds(np.array([0.0, np.nan]))
 
 
 def test_main_writes_outputs(tmp_path):

@@ -29,14 +29,16 @@ def _unit(scale, kind):
 
 def plot_history(results, x_key, y_key, png, xscale=1e3, yscale=1e-3, label=None, xlabel=None,
                  ylabel=None, title=None):
-    """Plot history column ``y_key`` against ``x_key`` for one run or overlay several.
+    """Plot history column(s) ``y_key`` against ``x_key`` for one run or overlay several.
 
     Parameters
     ----------
     results : str, Result or list of them
         the run(s).
-    x_key, y_key : str
-        history columns (SI).
+    x_key : str
+        history column (SI).
+    y_key : str or list of str
+        history column(s) (SI); several give one line each (e.g. the reactions of each wall).
     png : str
         output file.
     xscale, yscale : float
@@ -57,15 +59,18 @@ def plot_history(results, x_key, y_key, png, xscale=1e3, yscale=1e-3, label=None
         raise PlotError(f"plot_history: {len(labels)} labels for {len(runs)} runs")
     fig = Figure(figsize=(6.4, 4.8))
     ax = fig.add_subplot()
+    ys = list(y_key) if isinstance(y_key, (list, tuple)) else [y_key]
     for r, lab in zip(runs, labels):
-        for key in (x_key, y_key):
+        for key in [x_key] + ys:
             if key not in r.history:
                 raise PlotError(f"plot_history: {r.path} has no history column {key!r}; "
                                 f"columns are {list(r.history)}")
-        ax.plot(r.history[x_key] * xscale, r.history[y_key] * yscale, lw=1.2,
-                label=lab or os.path.basename(r.path))
+        for key in ys:
+            name = lab or os.path.basename(r.path)
+            ax.plot(r.history[x_key] * xscale, r.history[key] * yscale, lw=1.2,
+                    label=f"{name}: {key}" if len(ys) > 1 else name)
     ax.set_xlabel(xlabel or f"{x_key} [{_unit(xscale, 'm')}]")
-    ax.set_ylabel(ylabel or f"{y_key} [{_unit(yscale, 'N')}]")
+    ax.set_ylabel(ylabel or f"{', '.join(ys)} [{_unit(yscale, 'N')}]")
     if title:
         ax.set_title(title)
     ax.grid(True, lw=0.4, alpha=0.5)
@@ -78,9 +83,9 @@ def plot_history(results, x_key, y_key, png, xscale=1e3, yscale=1e-3, label=None
 
 
 def crack_map(result, frame, png, threshold=0.5, field="D", plane="xz", blocks=None, warp=0.0,
-              title=None):
+              title=None, element_field="dt"):
     """Elevation of a wall: block outlines, joint points with damage above ``threshold``, and
-    element tensile damage "dt" shaded.
+    element damage shaded (tensile "dt", or compressive "dc" for a crushing map).
 
     Parameters
     ----------
@@ -99,6 +104,8 @@ def crack_map(result, frame, png, threshold=0.5, field="D", plane="xz", blocks=N
         block ids or a block group name to draw (default all).
     warp : float
         displacement magnification (0: reference positions).
+    element_field : {"dt", "dc"}
+        element damage to shade.
 
     Returns
     -------
@@ -106,6 +113,8 @@ def crack_map(result, frame, png, threshold=0.5, field="D", plane="xz", blocks=N
         ``png``.
     """
     r = as_result(result)
+    if element_field not in ("dt", "dc"):
+        raise PlotError(f"crack_map: element_field must be 'dt' or 'dc', got {element_field!r}")
     if plane not in PLANES:
         raise PlotError(f"crack_map: plane must be one of {sorted(PLANES)}, got {plane!r}")
     a, b = PLANES[plane]
@@ -126,7 +135,7 @@ def crack_map(result, frame, png, threshold=0.5, field="D", plane="xz", blocks=N
     fig = Figure(figsize=(8, 6))
     ax = fig.add_subplot()
     ax.set_aspect("equal")
-    dt = fields.get("dt")
+    dt = fields.get(element_field)
     if dt is not None:
         elem = np.flatnonzero(keep[arrays["element_block"]] & (dt > 1e-3))
         elem = elem[np.argsort(dt[elem])]          # most damaged drawn last
@@ -136,7 +145,8 @@ def crack_map(result, frame, png, threshold=0.5, field="D", plane="xz", blocks=N
         pc = PolyCollection(faces, array=dt[elem], cmap="Greys", clim=(0.0, 1.0),
                             edgecolors="none")
         ax.add_collection(pc)
-        fig.colorbar(pc, ax=ax, shrink=0.6, label="block tensile damage dt")
+        kind = "tensile" if element_field == "dt" else "compressive"
+        fig.colorbar(pc, ax=ax, shrink=0.6, label=f"block {kind} damage {element_field}")
     corners = block_corner_nodes(arrays)[keep]
     seg = x[corners[:, HEX_EDGES]][:, :, :, [a, b]].reshape(-1, 2, 2)
     ax.add_collection(LineCollection(seg, colors="0.3", linewidths=0.5))

@@ -1,0 +1,367 @@
+"""Coarse correction of dynamic relaxation on the blocks' affine motions (two-level scheme).
+
+Explicit dynamic relaxation removes the error of a load increment mode by mode, at a rate set by
+the mode's frequency: the smooth, global deformation modes of a wall (many blocks moving and
+straining almost uniformly, the joints deforming) are the slowest, and they set the iteration
+count of large models. The coarse correction removes them directly. Every block gets the 12 DOFs
+of an affine motion u = a + B (X - c) (translation, rotation and uniform strain: a rigid-block
+space alone cannot compress a brick, and a compressed bed joint 10 x stiffer than the brick then
+stalls it), every rigid reference point its 6 DOFs, and the out-of-balance forces projected on
+them are solved for at once,
+
+    K_c dq = T^T r,     U <- U + T dq,     K_c = T^T K T (Galerkin),
+
+with ``T`` the interpolation of the coarse DOFs at the nodes and ``K`` the stiffness of the
+current state: the blocks' elastic strain energy of affine motions (exact for trilinear
+hexahedra; softened by the block's mean damage) and the joints' secant stiffnesses at each
+contact point (slave node against master point). Dynamic relaxation then only has to remove what
+the affine blocks cannot represent, local and fast: a two-level method with relaxation as the
+smoother. The operator is factorised once per increment (sparse LU) and refreshed when a step
+is rejected. A step is accepted only if it lowers the total potential energy of the trial state
+(halved twice before giving up; the out-of-balance norm is no guide, as a coarse motion leaves
+element-scale residuals); it changes trial states only, never the committed history, so it
+cannot damage anything the relaxation would not.
+
+Fixed blocks and blocks tied to reference points are not coarse unknowns (the latter move with
+their reference point, whose free DOFs are); held node DOFs of the other blocks (supports,
+symmetry planes, prescribed values) are kept by a stiff penalty; under indirect control the load
+factor is solved for with the step so that the controlled DOF stays where it is.
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from .kernels import relaxation as R
+from .kernels.plastic_damage import MS_DC, MS_DT
+
+#: coarse DOFs of a block (affine motion u = a + B (X - c)) and of a reference point (rigid)
+NB, NR = 12, 6
+
+
+def affine_t(d):
+    """Affine interpolation ``T`` (m, 3, 12) at arms ``d`` (m, 3): u = a + B d, DOFs
+    [a (3), B row by row (9)]."""
+    T = np.zeros((d.shape[0], 3, NB))
+    for k in range(3):
+        T[:, k, k] = 1.0
+        T[:, k, 3 + 3 * k:6 + 3 * k] = d
+    return T
+
+
+def rigid_t(d):
+    """Rigid-body interpolation ``T`` (m, 3, 12) at arms ``d`` (m, 3): u = u_p + theta x d,
+    DOFs [u_p (3), theta (3)], the last six columns zero."""
+    T = np.zeros((d.shape[0], 3, NB))
+    T[:, 0, 0] = T[:, 1, 1] = T[:, 2, 2] = 1.0
+    T[:, 0, 4], T[:, 0, 5] = d[:, 2], -d[:, 1]
+    T[:, 1, 3], T[:, 1, 5] = -d[:, 2], d[:, 0]
+    T[:, 2, 3], T[:, 2, 4] = d[:, 1], -d[:, 0]
+    return T
+
+
+def affine_stiffness(lam, mu):
+    """Strain-energy matrix (9, 9) of the gradient B of an affine motion per unit volume,
+    isotropic Lame constants ``lam``, ``mu`` (Pa): 1/2 V B:K:B = 1/2 V eps:C:eps."""
+    K = np.zeros((9, 9))
+    for k in range(3):
+        for j in range(3):
+            for l in range(3):
+                for m in range(3):
+                    K[3 * k + j, 3 * l + m] = (lam * (k == j) * (l == m)
+                                               + mu * ((k == l) * (j == m) + (k == m) * (j == l)))
+    return K
+
+
+class BlockCoarse:
+    """Coarse space of a :class:`~dr_masonry.solver.Simulation` after ``build()``.
+
+    Parameters
+    ----------
+    sim : Simulation
+    """
+
+    def __init__(self, sim):
+        m = sim.model
+        self.sim = sim
+        self.start = np.asarray(m.block_node_start, dtype=np.int64)   # (nb + 1,)
+        self.node_block = np.asarray(m.node_block, dtype=np.int64)    # (n,)
+        X = m.nodes
+        cnt = np.diff(self.start)
+        self.centre = np.add.reduceat(X, self.start[:-1], axis=0) / cnt[:, None]  # (nb, 3) m
+        self.fixed = np.asarray(m.block_fixed, dtype=bool)
+        laws = m.joint_laws
+        c = sim.cont
+        self.kc_el = np.array([lw.kc_pen for lw in laws])[c.law] if c.slave.size else np.zeros(0)
+        self.kt_el = np.array([lw.kss for lw in laws])[c.law] if c.slave.size else np.zeros(0)
+        if c.slave.size:  # reference normals of the master faces
+            xq = X[c.master]
+            nrm = np.cross(xq[:, 1] + xq[:, 2] - xq[:, 0] - xq[:, 3],
+                           xq[:, 2] + xq[:, 3] - xq[:, 0] - xq[:, 1])
+            self.normal = nrm / np.linalg.norm(nrm, axis=1)[:, None]
+        mesh = sim.mesh
+        eb = np.asarray(m.element_block)
+        self.volume = np.bincount(eb, mesh.wdet.sum(axis=1), minlength=m.n_blocks)  # (nb,) m^3
+        mats = m.materials
+        E = np.array([mt.E for mt in mats])[m.block_material]
+        nu = np.array([mt.nu for mt in mats])[m.block_material]
+        self.lame = np.column_stack([E * nu / ((1 + nu) * (1 - 2 * nu)), E / (2 * (1 + nu))])
+        self.n_elem = np.bincount(eb, minlength=m.n_blocks)
+        self.n_corrections = 0
+        self.n_rejected = 0
+        self.op = None
+
+    def groups(self):
+        """Coarse group of every block (-1: none) and the number of block groups: every block
+        that is neither fixed nor tied to a reference point."""
+        d = self.sim.dyn
+        tied = np.maximum.reduceat((d.tied >= 0).astype(np.int8), self.start[:-1]) > 0
+        ok = ~self.fixed & ~tied
+        g = np.full(ok.size, -1, dtype=np.int64)
+        g[ok] = np.arange(int(ok.sum()))
+        return g, int(ok.sum())
+
+    @staticmethod
+    def dof_map(nbg, nr):
+        """Global coarse DOF of each (group, slot) (nbg + nr, 12), -1 where unused, and the
+        number of coarse DOFs: 12 per block group, then 6 per reference point."""
+        dof = np.full((nbg + nr, NB), -1, dtype=np.int64)
+        dof[:nbg] = np.arange(NB * nbg).reshape(nbg, NB)
+        dof[nbg:, :NR] = NB * nbg + np.arange(NR * nr).reshape(nr, NR)
+        return dof, NB * nbg + NR * nr
+
+    def _interp(self, g, arm, nbg):
+        """``T`` (m, 3, 12) of points of groups ``g`` at arms ``arm``: affine for blocks, rigid
+        for reference points."""
+        T = affine_t(arm)
+        rp = g >= nbg
+        if rp.any():
+            T[rp] = rigid_t(arm[rp])
+        return T
+
+    def matrix(self, gblock, nbg, dof, ndof):
+        """Galerkin coarse stiffness T^T K T (csr, ndof square): the blocks' strain energy of
+        affine motions (elastic, scaled by the block's mean integrity) and the joints' current
+        secant stiffnesses."""
+        sim = self.sim
+        d, c, mesh = sim.dyn, sim.cont, sim.mesh
+        X = d.X
+        rows, cols, vals = [], [], []
+
+        def add(ga, gb, blk):
+            ii = np.broadcast_to(dof[ga][:, :, None], blk.shape)
+            jj = np.broadcast_to(dof[gb][:, None, :], blk.shape)
+            on = (ii >= 0) & (jj >= 0)
+            rows.append(ii[on])
+            cols.append(jj[on])
+            vals.append(blk[on])
+
+        # blocks: affine strain energy, damaged blocks softened by their mean integrity
+        blocks = np.nonzero(gblock >= 0)[0]
+        if blocks.size:
+            eb = self.sim.model.element_block
+            dmg = np.maximum(mesh.s_new[:, :, MS_DT], mesh.s_new[:, :, MS_DC]).mean(axis=1)
+            integrity = 1.0 - np.bincount(eb, dmg, minlength=gblock.size) / np.maximum(self.n_elem, 1)
+            k1 = affine_stiffness(1.0, 0.0)
+            k2 = affine_stiffness(0.0, 1.0)
+            w = (self.volume * integrity)[blocks]
+            blk = np.zeros((blocks.size, NB, NB))
+            blk[:, 3:, 3:] = (w * self.lame[blocks, 0])[:, None, None] * k1 \
+                + (w * self.lame[blocks, 1])[:, None, None] * k2
+            add(gblock[blocks], gblock[blocks], blk)
+        if c.slave.size:
+            N = np.empty((c.slave.size, 4))
+            r, s = c.xi[:, 0], c.xi[:, 1]
+            N[:, 0] = 0.25 * (1 - r) * (1 - s)
+            N[:, 1] = 0.25 * (1 + r) * (1 - s)
+            N[:, 2] = 0.25 * (1 + r) * (1 + s)
+            N[:, 3] = 0.25 * (1 - r) * (1 + s)
+            xm = np.matmul(N[:, None, :], X[c.master])[:, 0]
+            gs, ds = self._group_of(c.slave, X[c.slave], gblock, nbg)
+            gm, dm = self._group_of(c.master[:, 0], xm, gblock, nbg)
+            # secant stiffness of each point (N/m); closed or untouched points take the
+            # compression stiffness (a joint under load is mostly compressed)
+            gap, tr = c.gaps, c.trac
+            un = np.where(gap[:, 0] == 0.0, 1.0, gap[:, 0])
+            kn = np.where(np.abs(gap[:, 0]) > 1e-12, tr[:, 0] / un, self.kc_el)
+            slip = np.hypot(gap[:, 1], gap[:, 2])
+            kt = np.where(slip > 1e-12, np.hypot(tr[:, 1], tr[:, 2]) / np.maximum(slip, 1e-300),
+                          self.kt_el)
+            kn = np.clip(kn, 0.0, None) * c.area
+            kt = np.clip(kt, 0.0, None) * c.area
+            nrm = self.normal
+            K = (kn - kt)[:, None, None] * nrm[:, :, None] * nrm[:, None, :] \
+                + kt[:, None, None] * np.eye(3)[None]
+            Ts, Tm = self._interp(gs, ds, nbg), self._interp(gm, dm, nbg)
+            for ga, Ta, sa in ((gs, Ts, 1.0), (gm, Tm, -1.0)):
+                for gb, Tb, sb in ((gs, Ts, 1.0), (gm, Tm, -1.0)):
+                    on = (ga >= 0) & (gb >= 0)
+                    if on.any():
+                        add(ga[on], gb[on], sa * sb * np.matmul(Ta[on].transpose(0, 2, 1),
+                                                                np.matmul(K[on], Tb[on])))
+        if not rows:
+            return None
+        return sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                             shape=(ndof, ndof)).tocsr()
+
+    def potential(self, lam):
+        """Total potential energy (J) of the current trial state: stored energy of blocks and
+        joints minus the work of the applied loads at their current values (leaves the internal
+        forces of the state in ``dyn.fint``)."""
+        sim = self.sim
+        d = sim.dyn
+        e = R.internal_forces(sim.mesh, sim.cont, d)
+        w = float(((d.fext + lam * d.P) * d.U).sum())
+        w += float(((d.rpf + lam * d.rpP) * d.rpU * d.rpfree).sum())
+        return e - w
+
+    def _group_of(self, nodes, x, gblock, nbg):
+        """Coarse group (-1 none) and arm (m, 3) of points ``x`` on the blocks of ``nodes``."""
+        d = self.sim.dyn
+        b = self.node_block[nodes]
+        g = gblock[b].copy()
+        arm = x - self.centre[b]
+        tied = d.tied[nodes]
+        on = tied >= 0
+        g[on] = nbg + tied[on]
+        arm[on] = x[on] - d.rpX[tied[on]]
+        return g, arm
+
+    def refresh(self):
+        """Mark the coarse operator out of date (a new increment, or a rejected step)."""
+        self.op = None
+
+    def _operator(self, ctrl):
+        """Factorised coarse operator of the current state: a dict with the groups, the node
+        arms and interpolations, the kept DOFs ``idx``, ``solve`` and the control direction
+        ``tc`` (or None)."""
+        d = self.sim.dyn
+        gblock, nbg = self.groups()
+        nr = d.rpX.shape[0]
+        dof, ndof = self.dof_map(nbg, nr)
+        Kc = self.matrix(gblock, nbg, dof, ndof)
+        if Kc is None:
+            return None
+        nodes = np.nonzero(gblock[self.node_block] >= 0)[0]
+        g = gblock[self.node_block[nodes]]
+        arm = d.X[nodes] - self.centre[self.node_block[nodes]]
+        T = affine_t(arm)                                      # (m, 3, 12)
+        free = d.free[nodes].copy()
+        tc = None                                              # control direction (ndof,)
+        if ctrl[0] == 1:
+            j = np.searchsorted(nodes, ctrl[1])
+            if j < nodes.size and nodes[j] == ctrl[1]:
+                tc = np.zeros(ndof)
+                tc[dof[g[j]]] = T[j, ctrl[2]]
+                free[j, ctrl[2]] = 1.0                        # held by dlam, not by a penalty
+        elif ctrl[0] == 2:
+            tc = np.zeros(ndof)
+            tc[dof[nbg + ctrl[1], ctrl[2]]] = 1.0
+        diag = Kc.diagonal()
+        kpen = 1e3 * np.median(diag[dof[:nbg, :3]]) if nbg else 0.0
+        hi, hk = np.nonzero(free == 0.0)
+        if hi.size:                                            # penalty on held node DOFs
+            t = T[hi, hk]                                      # (h, 12)
+            blk = kpen * t[:, :, None] * t[:, None, :]
+            ii = np.broadcast_to(dof[g[hi]][:, :, None], blk.shape).ravel()
+            jj = np.broadcast_to(dof[g[hi]][:, None, :], blk.shape).ravel()
+            Kc = Kc + sp.coo_matrix((blk.ravel(), (ii, jj)), shape=Kc.shape).tocsr()
+        keep = np.ones(ndof, bool)
+        keep[NB * nbg:] = d.rpfree.ravel() > 0
+        if ctrl[0] == 2:
+            keep[dof[nbg + ctrl[1], ctrl[2]]] = True
+        keep &= Kc.diagonal() > 0
+        idx = np.nonzero(keep)[0]
+        if idx.size == 0:
+            return None
+        A = Kc[idx][:, idx]
+        dg = A.diagonal()
+        A = (A + sp.diags(1e-10 * dg + 1e-14 * dg.max())).tocsc()
+        try:
+            solve = spla.factorized(A)
+        except RuntimeError:
+            return None
+        return dict(nbg=nbg, nr=nr, dof=dof, ndof=ndof, nodes=nodes, g=g, arm=arm, free=free,
+                    idx=idx, solve=solve, tc=tc)
+
+    def _project(self, op, f_nodes, f_rp):
+        """Coarse vector (ndof,) T^T f: nodal forces (n, 3) of the block groups as their sums
+        and first moments about the block centres, plus the reference points' generalised
+        forces (nr, 6)."""
+        nbg, g, arm = op["nbg"], op["g"], op["arm"]
+        f = f_nodes[op["nodes"]] * op["free"]
+        out = np.zeros(op["ndof"])
+        blk = np.zeros((nbg, NB))
+        for k in range(3):
+            blk[:, k] = np.bincount(g, f[:, k], minlength=nbg)
+            for j in range(3):
+                blk[:, 3 + 3 * k + j] = np.bincount(g, f[:, k] * arm[:, j], minlength=nbg)
+        out[:NB * nbg] = blk.ravel()
+        out[NB * nbg:] = f_rp.ravel()
+        return out
+
+    def correct(self, lam_arr, rpres, ctrl):
+        """Apply one coarse correction to ``sim.dyn`` (after ``internal_forces`` and ``residual``
+        of the current state); returns True if it lowered the potential energy (else undone).
+
+        The operator is factorised at the first correction of an increment and reused until a
+        step is rejected. Held node DOFs (supports, prescribed values) of coarse blocks are kept
+        by a penalty, held reference-point DOFs are dropped. Under indirect control (``ctrl`` as
+        in ``R.relax``) the load factor ``lam_arr[0]`` changes too, so that the controlled DOF
+        does not move (bordered solve: dq = a + dlam b, K a = r, K b = p, t_c . dq = 0).
+        """
+        sim = self.sim
+        d = sim.dyn
+        lam = lam_arr[0]
+        if self.op is None:
+            self.op = self._operator(ctrl)
+        op = self.op
+        if op is None:
+            return False
+        nbg, nr, idx, tc = op["nbg"], op["nr"], op["idx"], op["tc"]
+        nodes, g, arm = op["nodes"], op["g"], op["arm"]
+        dq_k = op["solve"](self._project(op, d.res, rpres)[idx])
+        dlam = 0.0
+        if tc is not None:
+            prp = d.rpP.copy()                                 # tied nodes' share: see residual
+            for p in range(nr):
+                tn = d.rpnodes[d.rpptr[p]:d.rpptr[p + 1]]
+                prp[p, :3] += d.P[tn].sum(axis=0)
+                prp[p, 3:] += np.cross(d.X[tn] - d.rpX[p], d.P[tn]).sum(axis=0)
+            b = op["solve"](self._project(op, d.P, prp)[idx])
+            tb = tc[idx] @ b
+            if tb != 0.0:
+                dlam = -(tc[idx] @ dq_k) / tb
+                dq_k = dq_k + dlam * b
+        if not (np.all(np.isfinite(dq_k)) and np.isfinite(dlam)):
+            self.op = None
+            return False
+        dq = np.zeros(op["ndof"])
+        dq[idx] = dq_k
+        qb = dq[:NB * nbg].reshape(nbg, NB)[g]                 # (m, 12)
+        du = (qb[:, :3] + np.einsum("mkj,mj->mk", qb[:, 3:].reshape(-1, 3, 3), arm)) \
+            * d.free[nodes]
+        drp = dq[NB * nbg:].reshape(nr, NR) * d.rpfree
+        # the step of a linear coarse model, scaled back while it raises the potential energy
+        U0, rpU0 = d.U.copy(), d.rpU.copy()
+        self.n_corrections += 1
+        for step in (1.0, 0.5, 0.25):
+            lam_new = lam + step * dlam
+            d.U[:], d.rpU[:] = U0, rpU0
+            R.place_rigid_nodes(d)
+            pi0 = self.potential(lam_new)
+            d.U[nodes] += step * du
+            d.rpU[:] += step * drp
+            R.place_rigid_nodes(d)
+            if self.potential(lam_new) < pi0:
+                lam_arr[0] = lam_new
+                d.V[:] = 0.0
+                d.rpV[:] = 0.0
+                return True
+        d.U[:], d.rpU[:] = U0, rpU0
+        R.place_rigid_nodes(d)
+        R.internal_forces(sim.mesh, sim.cont, d)
+        self.n_rejected += 1
+        self.op = None
+        return False
