@@ -193,17 +193,32 @@ class BlockCoarse:
             nrm = self.normal
             K = (kn - kt)[:, None, None] * nrm[:, :, None] * nrm[:, None, :] \
                 + kt[:, None, None] * np.eye(3)[None]
+            # K_joints = B^T diag(K_c) B, B (3 nc, ndof) the relative motion of each point
             Ts, Tm = self._interp(gs, ds, nbg), self._interp(gm, dm, nbg)
-            for ga, Ta, sa in ((gs, Ts, 1.0), (gm, Tm, -1.0)):
-                for gb, Tb, sb in ((gs, Ts, 1.0), (gm, Tm, -1.0)):
-                    on = (ga >= 0) & (gb >= 0)
-                    if on.any():
-                        add(ga[on], gb[on], sa * sb * np.matmul(Ta[on].transpose(0, 2, 1),
-                                                                np.matmul(K[on], Tb[on])))
-        if not rows:
-            return None
-        return sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                             shape=(ndof, ndof)).tocsr()
+            nc = c.slave.size
+            bi, bj, bv = [], [], []
+            for gg, TT, sign in ((gs, Ts, 1.0), (gm, Tm, -1.0)):
+                cdof = np.where(gg[:, None] >= 0, dof[np.maximum(gg, 0)], -1)   # (nc, 12)
+                rr = np.broadcast_to((3 * np.arange(nc))[:, None, None] + np.arange(3)[None, :, None],
+                                     TT.shape)
+                cc = np.broadcast_to(cdof[:, None, :], TT.shape)
+                on = cc >= 0
+                bi.append(rr[on])
+                bj.append(cc[on])
+                bv.append(sign * TT[on])
+            B = sp.csr_matrix((np.concatenate(bv), (np.concatenate(bi), np.concatenate(bj))),
+                              shape=(3 * nc, ndof))
+            D = sp.bsr_matrix((K, np.arange(nc), np.arange(nc + 1)), shape=(3 * nc, 3 * nc))
+            joints = (B.T @ (D @ B)).tocsr()
+        else:
+            joints = None
+        Kc = joints
+        if rows:
+            blocks_k = sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows),
+                                                             np.concatenate(cols))),
+                                     shape=(ndof, ndof)).tocsr()
+            Kc = blocks_k if Kc is None else Kc + blocks_k
+        return Kc
 
     def potential(self, lam):
         """Total potential energy (J) of the current trial state: stored energy of blocks and

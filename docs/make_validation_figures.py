@@ -1,0 +1,73 @@
+"""Figures of docs/validation.md from the result files of the validation runs (S4-S7).
+
+Usage: ``python docs/make_validation_figures.py RESULT.h5 [RESULT.h5 ...]``: for each file, the
+scene is read from the file's stored configuration; writes into docs/ the response curve, the
+crack map (joint damage and block tensile damage) at the frame nearest the peak and at the last
+frame, the crushing map (block compressive damage) at the last frame and, for the house, the
+vertical reactions of each wall and pier (paper Fig. 26). Commands that made the result files are
+listed in docs/validation.md.
+"""
+import os
+import sys
+
+import numpy as np
+
+from dr_masonry.results import open_result
+from dr_masonry.viz.plots import crack_map, plot_history
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+
+#: scene -> (x column, y column, y scale, elevations: (plane, block group or None, label))
+SCENES = {
+    "squat_wall": ("beam.ux", "beam.fx", 1e-3, [("xz", None, "")]),
+    "slender_wall": ("beam.ux", "beam.fx", 1e-3, [("xz", None, "")]),
+    "out_of_plane_wall": ("centre.uy", "lambda", 1e-3, [("xz", None, "")]),
+    "terraced_house": ("floor2.ux", "lambda", 4e-3, [("xz", "facade", "_facade"),
+                                                     ("yz", "transversal_wall_1", "_W1"),
+                                                     ("yz", "transversal_wall_2", "_W2")]),
+}
+
+
+def scene_of(r):
+    out = r.config.get("out", "")
+    for name in SCENES:
+        if name in r.path or name in out:
+            return name
+    if "direction" in r.config:
+        return "terraced_house"
+    if "target" in r.config:
+        return "out_of_plane_wall"
+    return "squat_wall"
+
+
+def nearest_frame(r, increment):
+    ids = np.asarray(r.frame_ids)
+    return int(np.argmin(np.abs(ids - increment)))
+
+
+def figures(path):
+    r = open_result(path)
+    scene = scene_of(r)
+    xk, yk, ys, views = SCENES[scene]
+    stem = os.path.join(HERE, os.path.splitext(os.path.basename(path))[0])
+    h = r.history
+    made = [plot_history(r, xk, yk, stem + "_curve.png", yscale=ys, label=scene)]
+    if scene == "terraced_house":
+        made.append(plot_history(r, xk, [f"{n}.fz" for n in ("base_P1", "base_P2", "base_W1",
+                                                             "base_W2")],
+                                 stem + "_reactions.png", ylabel="vertical reaction, half model [kN]",
+                                 title="reactions of the piers (P1 wide, P2 narrow) and walls"))
+    peak = int(h["increment"][int(np.argmax(np.abs(h[yk])))])
+    for plane, group, tag in views:
+        for which, frame in (("peak", nearest_frame(r, peak)), ("end", -1)):
+            made.append(crack_map(r, frame, f"{stem}{tag}_cracks_{which}.png", plane=plane,
+                                  blocks=group, warp=0.0))
+        made.append(crack_map(r, -1, f"{stem}{tag}_crushing_end.png", plane=plane, blocks=group,
+                              element_field="dc", threshold=0.99))
+    return made
+
+
+if __name__ == "__main__":
+    for p in sys.argv[1:]:
+        for f in figures(p):
+            print(f)
