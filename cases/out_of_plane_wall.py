@@ -56,6 +56,7 @@ PARAMS = dict(
     beam_height=0.20,       # steel loading beam height, m
     tol=1e-4,
     damping="viscous",
+    coarse=True,            # two-level relaxation (SolverOptions.coarse)
     frames=5,               # write a field frame every this many increments
     fast=False,             # preset FAST: tiny 0.88 x 0.81 m coarse wall, few increments
     out="results/out_of_plane_wall",

@@ -63,6 +63,7 @@ PARAMS = dict(
     beam_height=0.20,       # steel loading beam height, m
     tol=1e-4,
     damping="viscous",
+    coarse=True,            # two-level relaxation (SolverOptions.coarse)
     frames=5,               # write a field frame every this many increments
     fast=False,             # preset FAST: tiny 0.88 x 0.81 m coarse wall, few increments
     out="results/squat_wall",
@@ -135,6 +136,7 @@ def rig(params, law, block):
     hb = params["beam_height"]
     beam_block = add_beam(model, (0, 0, H), (L, t, hb), STEEL, element_size=esize)
     sim = Simulation(model, SolverOptions(tol=params["tol"], damping=params["damping"],
+                                          coarse=params["coarse"],
                                           progress=params.get("progress", False)),
                      output=params.get("h5"), config=params)
     beam = sim.rigid_point("beam", blocks=[beam_block], position=(0.5 * L, 0.5 * t, H))

@@ -60,6 +60,7 @@ PARAMS = dict(
     slab_element=0.22,      # slab and foundation hexahedron size in plan, m
     tol=1e-4,
     damping="viscous",
+    coarse=True,            # two-level relaxation (SolverOptions.coarse)
     frames=5,               # write a field frame every this many increments
     fast=False,             # preset FAST: small coarse house of large blocks, few increments
     out="results/terraced_house",
@@ -104,6 +105,7 @@ def build(params):
     slab = CONCRETE.with_changes(density=CONCRETE.density * hp.slab_thickness / lay.slab_thickness)
     groups = terraced_house(model, hp, PlasticDamage.reference(), CONCRETE, slab)
     sim = Simulation(model, SolverOptions(tol=params["tol"], damping=params["damping"],
+                                          coarse=params["coarse"],
                                           progress=params.get("progress", False)),
                      output=params.get("h5"), config=params)
     floors = [sim.rigid_point(f"floor{i + 1}", blocks=groups[f"slabs_floor{i + 1}"])

@@ -16,8 +16,7 @@ current state: the blocks' elastic strain energy of affine motions (exact for tr
 hexahedra; softened by the block's mean damage) and the joints' secant stiffnesses at each
 contact point (slave node against master point). Dynamic relaxation then only has to remove what
 the affine blocks cannot represent, local and fast: a two-level method with relaxation as the
-smoother. The operator is factorised once per increment (sparse LU) and refreshed when a step
-is rejected. A step is accepted only if it lowers the total potential energy of the trial state
+smoother. The operator is factorised once per increment (sparse LU). A step is accepted only if it lowers the total potential energy of the trial state
 (halved twice before giving up; the out-of-balance norm is no guide, as a coarse motion leaves
 element-scale residuals); it changes trial states only, never the committed history, so it
 cannot damage anything the relaxation would not.
@@ -320,8 +319,8 @@ class BlockCoarse:
         """Apply one coarse correction to ``sim.dyn`` (after ``internal_forces`` and ``residual``
         of the current state); returns True if it lowered the potential energy (else undone).
 
-        The operator is factorised at the first correction of an increment and reused until a
-        step is rejected. Held node DOFs (supports, prescribed values) of coarse blocks are kept
+        The operator is factorised at the first correction of an increment and reused for the
+        increment. Held node DOFs (supports, prescribed values) of coarse blocks are kept
         by a penalty, held reference-point DOFs are dropped. Under indirect control (``ctrl`` as
         in ``R.relax``) the load factor ``lam_arr[0]`` changes too, so that the controlled DOF
         does not move (bordered solve: dq = a + dlam b, K a = r, K b = p, t_c . dq = 0).
@@ -378,5 +377,4 @@ class BlockCoarse:
         R.place_rigid_nodes(d)
         R.internal_forces(sim.mesh, sim.cont, d)
         self.n_rejected += 1
-        self.op = None
         return False

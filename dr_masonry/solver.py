@@ -528,9 +528,10 @@ class Simulation:
 
     def _relax(self, ctrl, pc, tol, max_iter, info):
         """Relax the increment (``R.relax``); with ``options.coarse``, in spans of
-        ``coarse_every`` iterations (doubled after each rejected correction, up to 16 x), each
-        preceded by a coarse correction on the blocks' rigid motions (:mod:`dr_masonry.coarse`).
-        ``info`` holds the totals."""
+        ``coarse_every`` iterations (doubled after a rejected correction and after the tenth of
+        an increment, up to 64 x; none after two rejections in a row), each preceded by a coarse
+        correction on the blocks' affine motions (:mod:`dr_masonry.coarse`). ``info`` holds the
+        totals."""
         o, d = self.options, self.dyn
         args = (DAMPING[o.damping], o.alpha, tol, self.ref_floor)
         if not o.coarse:
@@ -542,14 +543,25 @@ class Simulation:
             self.coarse = BlockCoarse(self)
         rpres = np.zeros((d.rpX.shape[0], 6))
         self.coarse.refresh()
-        done, damped, every = 0, 0.0, o.coarse_every
+        done, damped, every, tries, rejected = 0, 0.0, o.coarse_every, 0, 0
         while True:
-            R.place_rigid_nodes(d)
-            R.internal_forces(self.mesh, self.cont, d)
-            R.residual(d, self.lam[0], rpres)
-            # a rejected correction lets the relaxation run longer before the next try
-            ok = self.coarse.correct(self.lam, rpres, ctrl)
-            every = o.coarse_every if ok else min(2 * every, 16 * o.coarse_every)
+            if rejected < 2:
+                R.place_rigid_nodes(d)
+                R.internal_forces(self.mesh, self.cont, d)
+                R.residual(d, self.lam[0], rpres)
+                ok = self.coarse.correct(self.lam, rpres, ctrl)
+                rejected = 0 if ok else rejected + 1
+                tries += 1
+            # a rejected correction, and every one after the first ten of an increment (in
+            # softening, accepted steps may keep restarting the relaxation without finishing it),
+            # let the relaxation run twice as long before the next try; after two rejections in
+            # a row the secant model no longer helps: plain relaxation finishes the increment
+            if rejected >= 2:
+                every = max_iter
+            elif ok and tries <= 10:
+                every = o.coarse_every
+            else:
+                every = min(2 * every, 64 * o.coarse_every)
             span = min(every, max_iter - done)
             R.relax(self.mesh, self.cont, d, self.lam, ctrl, pc, *args, span, o.check_every,
                     0.5 * self.size, info)
