@@ -35,6 +35,10 @@ DAMPING = {"kinetic": R.DAMP_KINETIC, "viscous": R.DAMP_VISCOUS, "local": R.DAMP
            "fire": R.DAMP_FIRE}
 
 
+#: "auto" coarse correction from this many movable blocks on (walls; not couplets and triplets)
+COARSE_MIN_BLOCKS = 30
+
+
 class SolverError(RuntimeError):
     """A run stopped: the message says where (increment, node/block) and which quantity."""
 
@@ -58,9 +62,10 @@ class SolverOptions:
         (sum over DOFs of |f du|, which equals W_ext on monotonic paths and stays meaningful
         when works of opposite sign cancel, as gravity and the push of a rocking block do)
     predictor : start each increment from the previous one's displacement increment (same direction)
-    coarse : two-level relaxation (default): a Galerkin coarse correction on the blocks' affine
-        motions (:mod:`dr_masonry.coarse`) before every span of ``coarse_every`` iterations;
-        3-11 x fewer iterations on walls (BENCHMARKS.md)
+    coarse : two-level relaxation: a Galerkin coarse correction on the blocks' affine motions
+        (:mod:`dr_masonry.coarse`) before every span of ``coarse_every`` iterations; True, False
+        or "auto" (default: on for models of at least ``COARSE_MIN_BLOCKS`` movable blocks, where
+        it saves 3-10 x the iterations; on a few blocks it only adds work, BENCHMARKS.md)
     progress : show a progress bar
     """
     damping: str = "viscous"
@@ -72,7 +77,7 @@ class SolverOptions:
     check_every: int = 10
     energy_tol: float = 0.01
     predictor: bool = True
-    coarse: bool = True
+    coarse: object = "auto"
     coarse_every: int = 200
     progress: bool = False
 
@@ -87,6 +92,9 @@ class SolverOptions:
                 raise ValueError(f"SolverOptions.{name} must be positive and finite, got {v}")
         if self.safety < 1.0:
             raise ValueError(f"SolverOptions.safety must be >= 1 for a stable step, got {self.safety}")
+        if self.coarse not in (True, False, "auto"):
+            raise ValueError(f"SolverOptions.coarse must be True, False or 'auto', got "
+                             f"{self.coarse!r}")
         if self.max_iter < 1 or self.check_every < 1 or self.max_cuts < 0 or self.coarse_every < 1:
             raise ValueError("SolverOptions: max_iter, check_every and coarse_every must be >= 1, "
                              "max_cuts >= 0")
@@ -277,6 +285,9 @@ class Simulation:
                        z.copy(), rpX, np.zeros((nr, 6)), np.zeros((nr, 6)), rpminv,
                        np.ones((nr, 6)), np.zeros((nr, 6)), np.zeros((nr, 6)), rpptr, rpnodes,
                        rpradius)
+        movable = int((~m.block_fixed).sum())
+        self.use_coarse = (o.coarse is True
+                           or (o.coarse == "auto" and movable >= COARSE_MIN_BLOCKS))
         self.size = float(np.max(np.ptp(X, axis=0)))
         self.ref_floor = 1e-9 * float(rowsum.max()) * self.size
         self.lam = np.zeros(1)
@@ -515,9 +526,12 @@ class Simulation:
         if status == R.ST_MAXITER:
             self._restore(snap)
             if depth >= o.max_cuts:
+                hint = ("; the out-of-balance force exceeds the loads: an unstable step (safety "
+                        f"factor {o.safety}) or a structure that lost equilibrium"
+                        if info[R.I_RESID] >= 1.0 else "")
                 self._fail(f"increment {self.increment + 1} of stage {stage.name!r} did not converge "
                            f"in {max_iter} iterations after {depth} cuts (residual ratio "
-                           f"{info[R.I_RESID]:.2e} > tol {tol:.1e})")
+                           f"{info[R.I_RESID]:.2e} > tol {tol:.1e}){hint}")
             mid = {k: 0.5 * (start[k] + goal[k]) for k in goal}
             self._increment(stage, targets, mid, indirect, depth + 1)
             self._increment(stage, targets, goal, indirect, depth + 1)
@@ -534,7 +548,7 @@ class Simulation:
         totals."""
         o, d = self.options, self.dyn
         args = (DAMPING[o.damping], o.alpha, tol, self.ref_floor)
-        if not o.coarse:
+        if not self.use_coarse:
             R.relax(self.mesh, self.cont, d, self.lam, ctrl, pc, *args, max_iter, o.check_every,
                     0.5 * self.size, info)
             return

@@ -66,15 +66,16 @@ def test_unsafe_step_is_refused():
 
 def test_unstable_run_stops_with_diagnosis(tmp_path):
     """A step far beyond the stable one (safety forced to 0.05) never converges: the increment
-    is cut, then the run stops naming the increment and the residual, and the result file written
-    so far stays readable (no NaN written)."""
+    is cut, then the run stops naming the increment, the residual and the likely cause, and the
+    result file written so far stays readable (no NaN written)."""
     from dr_masonry.results import open_result
     params = dict(couplet.PARAMS, h5=str(tmp_path / "u.h5"))
     sim, stages = couplet.build(params)
     sim.options.safety = 0.05  # bypasses validation on purpose
     sim.options.max_iter = 2000
     sim.options.max_cuts = 1
-    with pytest.raises(SolverError, match=r"increment 1 of stage 'tension' did not converge"):
+    with pytest.raises(SolverError, match=r"increment 1 of stage 'tension' did not converge"
+                                          r".* unstable step \(safety factor 0.05\)"):
         sim.run(stages)
     sim.close()
     r = open_result(str(tmp_path / "u.h5"))
