@@ -17,14 +17,15 @@ from dr_masonry.viz.plots import crack_map, plot_history
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 
-#: scene -> (x column, y column, y scale, elevations: (plane, block group or None, label))
+#: scene -> (x column, y column, y scale, elevations: (plane, block groups or None, label))
 SCENES = {
     "squat_wall": ("beam.ux", "beam.fx", 1e-3, [("xz", None, "")]),
     "slender_wall": ("beam.ux", "beam.fx", 1e-3, [("xz", None, "")]),
     "out_of_plane_wall": ("centre.uy", "lambda", 1e-3, [("xz", None, "")]),
-    "terraced_house": ("floor2.ux", "lambda", 4e-3, [("xz", "facade", "_facade"),
-                                                     ("yz", "transversal_wall_1", "_W1"),
-                                                     ("yz", "transversal_wall_2", "_W2")]),
+    "terraced_house": ("floor2.ux", "lambda", 4e-3,
+                       [("xz", ("pier_wide", "pier_narrow", "spandrel", "lintel"), "_facade"),
+                        ("yz", ("transversal_wall_1",), "_W1"),
+                        ("yz", ("transversal_wall_2",), "_W2")]),
 }
 
 
@@ -58,7 +59,8 @@ def figures(path):
                                  stem + "_reactions.png", ylabel="vertical reaction, half model [kN]",
                                  title="reactions of the piers (P1 wide, P2 narrow) and walls"))
     peak = int(h["increment"][int(np.argmax(np.abs(h[yk])))])
-    for plane, group, tag in views:
+    for plane, names, tag in views:
+        group = None if names is None else np.concatenate([r.groups[n] for n in names])
         for which, frame in (("peak", nearest_frame(r, peak)), ("end", -1)):
             made.append(crack_map(r, frame, f"{stem}{tag}_cracks_{which}.png", plane=plane,
                                   blocks=group, warp=0.0))
