@@ -76,7 +76,7 @@ def build(params):
     sim, wall, beam, base, pre = squat_wall.rig(params, JointLaw.reference(),
                                                 PlasticDamage.reference())
     model = sim.model
-    L, t, H = wall.length, wall.thickness, wall.height
+    L, H = wall.length, wall.height
     bricks = [b for c in wall.courses for b in c]
     quads = np.concatenate([model.block_face(b, 2)[1] for b in bricks])  # faces y = 0
     x = model.nodes[quads]
