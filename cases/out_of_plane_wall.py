@@ -35,9 +35,8 @@ from dr_masonry import (Combined, Displacement, Indirect, JointLaw, PlasticDamag
                         Stage)
 from dr_masonry.cases import squat_wall
 from dr_masonry.geometry import plane_nodes
-from dr_masonry.params import parse_overrides
 from dr_masonry.protocols import S6
-from dr_masonry.scene import finish
+from dr_masonry.scene import finish, scene_params, solver_summary
 from dr_masonry.units import MPa, kN, mm
 
 PARAMS = dict(
@@ -120,19 +119,11 @@ def report(sim, hist, push):
     F, u = hist["lateral_force"][push], hist["centre.uy"][push]
     k = int(np.argmax(np.abs(F)))
     return (f"peak lateral force {F[k] / kN:.2f} kN ({F[k] / sim.loaded_area / 1e3:.2f} kPa) at "
-            f"centre displacement {u[k] / mm:.2f} mm; max joint damage "
-            f"{hist['max_joint_damage'][-1]:.2f}, block dt {hist['max_dt'][-1]:.2f}; iterations per "
-            f"increment {np.mean(hist['iterations'][push]):.0f} (max "
-            f"{np.max(hist['iterations'][push]):.0f}); relaxation time {np.sum(hist['time_s']):.1f} s")
+            f"centre displacement {u[k] / mm:.2f} mm; " + solver_summary(hist, push))
 
 
 def main(argv=None):
-    argv = sys.argv[1:] if argv is None else argv
-    params = parse_overrides(PARAMS, argv, __doc__)
-    if params["fast"]:
-        params = parse_overrides(dict(PARAMS, **FAST), argv, __doc__)
-    params["h5"] = params["out"] + ".h5"
-    params["progress"] = True
+    params = scene_params(PARAMS, FAST, sys.argv[1:] if argv is None else argv, __doc__)
     sim, hist, push = run(params)
     finish(sim, params["out"], x=hist["centre.uy"][push] / mm,
            y=hist["lateral_force"][push] / kN, xlabel="centre displacement (mm)",

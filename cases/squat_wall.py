@@ -39,9 +39,9 @@ from dr_masonry import (Displacement, Force, JointLaw, Load, Model, PlasticDamag
                         SolverOptions, Stage)
 from dr_masonry.geometry import BrickSpec, add_beam, add_foundation, add_wall, plane_nodes
 from dr_masonry.loading import Gravity
-from dr_masonry.params import ParameterError, parse_overrides
+from dr_masonry.params import ParameterError
 from dr_masonry.protocols import S5
-from dr_masonry.scene import finish
+from dr_masonry.scene import finish, scene_params, solver_summary
 from dr_masonry.units import MPa, kN, mm
 
 PARAMS = dict(
@@ -194,19 +194,11 @@ def report(sim, hist, push):
     V, u = hist["beam.fx"][push], hist["beam.ux"][push]
     k = int(np.argmax(np.abs(V)))
     return (f"peak base shear {V[k] / kN:.2f} kN at top displacement {u[k] / mm:.2f} mm; "
-            f"max joint damage {hist['max_joint_damage'][-1]:.2f}, block dt "
-            f"{hist['max_dt'][-1]:.2f}, dc {hist['max_dc'][-1]:.2f}; iterations per increment "
-            f"{np.mean(hist['iterations'][push]):.0f} (max {np.max(hist['iterations'][push]):.0f}); "
-            f"relaxation time {np.sum(hist['time_s']):.1f} s")
+            + solver_summary(hist, push))
 
 
 def main(argv=None, doc=__doc__, defaults=PARAMS, protocol=S5, title="S5 squat wall"):
-    argv = sys.argv[1:] if argv is None else argv
-    params = parse_overrides(defaults, argv, doc)
-    if params["fast"]:                  # the preset first, explicit overrides on top
-        params = parse_overrides(dict(defaults, **FAST), argv, doc)
-    params["h5"] = params["out"] + ".h5"
-    params["progress"] = True
+    params = scene_params(defaults, FAST, sys.argv[1:] if argv is None else argv, doc)
     sim, hist, push = run(params, protocol)
     finish(sim, params["out"], x=hist["beam.ux"][push] / mm, y=hist["beam.fx"][push] / kN,
            xlabel="top displacement (mm)", ylabel="base shear (kN)",

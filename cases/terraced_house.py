@@ -42,9 +42,9 @@ from dr_masonry import (Combined, Displacement, Indirect, JointLaw, Load, Model,
                         PointLoad, Simulation, SolverOptions, Stage)
 from dr_masonry.geometry import BrickSpec, HouseParams, terraced_house
 from dr_masonry.loading import Gravity
-from dr_masonry.params import ParameterError, parse_overrides
+from dr_masonry.params import ParameterError
 from dr_masonry.protocols import S7
-from dr_masonry.scene import finish
+from dr_masonry.scene import finish, scene_params, solver_summary
 from dr_masonry.units import kN, mm
 
 PARAMS = dict(
@@ -154,19 +154,11 @@ def report(sim, hist, push):
     V, u = hist["base_shear"][push], hist[f"{sim.floors[-1].name}.ux"][push]
     k = int(np.argmax(np.abs(V)))
     return (f"peak base shear (whole house) {V[k] / kN:.1f} kN at top displacement "
-            f"{u[k] / mm:.2f} mm; max joint damage {hist['max_joint_damage'][-1]:.2f}, block dt "
-            f"{hist['max_dt'][-1]:.2f}, dc {hist['max_dc'][-1]:.2f}; iterations per increment "
-            f"{np.mean(hist['iterations'][push]):.0f} (max {np.max(hist['iterations'][push]):.0f});"
-            f" relaxation time {np.sum(hist['time_s']):.1f} s")
+            f"{u[k] / mm:.2f} mm; " + solver_summary(hist, push))
 
 
 def main(argv=None):
-    argv = sys.argv[1:] if argv is None else argv
-    params = parse_overrides(PARAMS, argv, __doc__)
-    if params["fast"]:
-        params = parse_overrides(dict(PARAMS, **FAST), argv, __doc__)
-    params["h5"] = params["out"] + ".h5"
-    params["progress"] = True
+    params = scene_params(PARAMS, FAST, sys.argv[1:] if argv is None else argv, __doc__)
     sim, hist, push = run(params)
     top = f"{sim.floors[-1].name}.ux"
     finish(sim, params["out"], x=hist[top][push] / mm, y=hist["base_shear"][push] / kN,

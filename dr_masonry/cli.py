@@ -33,15 +33,20 @@ def available_cases():
                   if not m.name.startswith("_"))
 
 
-def _cmd_run(args):
-    name = args.case
+def import_case(name):
+    """The module ``dr_masonry.cases.<name>``; ParameterError naming the valid cases if unknown."""
     try:
-        mod = importlib.import_module(f"dr_masonry.cases.{name}")
+        return importlib.import_module(f"dr_masonry.cases.{name}")
     except ModuleNotFoundError as e:
         if e.name != f"dr_masonry.cases.{name}":
             raise
         raise ParameterError(f"unknown case {name!r}; available: "
-                         f"{', '.join(available_cases()) or '(none)'}") from None
+                             f"{', '.join(available_cases()) or '(none)'}") from None
+
+
+def _cmd_run(args):
+    name = args.case
+    mod = import_case(name)
     if not hasattr(mod, "main"):
         raise ParameterError(f"case {name!r} has no main(argv)")
     rc = mod.main(list(args.overrides))

@@ -248,8 +248,8 @@ class BlockCoarse:
 
     def _operator(self, ctrl):
         """Factorised coarse operator of the current state: a dict with the groups, the node
-        arms and interpolations, the kept DOFs ``idx``, ``solve`` and the control direction
-        ``tc`` (or None)."""
+        arms and interpolations, the kept DOFs ``idx``, ``solve``, the control direction ``tc``
+        and the coarse response ``b`` to the indirect pattern (both None without control)."""
         d = self.sim.dyn
         gblock, nbg = self.groups()
         nr = d.rpX.shape[0]
@@ -296,8 +296,16 @@ class BlockCoarse:
             solve = spla.factorized(A)
         except RuntimeError:
             return None
-        return dict(nbg=nbg, nr=nr, dof=dof, ndof=ndof, nodes=nodes, g=g, arm=arm, free=free,
-                    idx=idx, solve=solve, tc=tc)
+        op = dict(nbg=nbg, nr=nr, dof=dof, ndof=ndof, nodes=nodes, g=g, arm=arm, free=free,
+                  idx=idx, solve=solve, tc=tc, b=None)
+        if tc is not None:  # response to the indirect pattern, fixed over the increment
+            prp = d.rpP.copy()                                 # tied nodes' share: see residual
+            for p in range(nr):
+                tn = d.rpnodes[d.rpptr[p]:d.rpptr[p + 1]]
+                prp[p, :3] += d.P[tn].sum(axis=0)
+                prp[p, 3:] += np.cross(d.X[tn] - d.rpX[p], d.P[tn]).sum(axis=0)
+            op["b"] = solve(self._project(op, d.P, prp)[idx])
+        return op
 
     def _project(self, op, f_nodes, f_rp):
         """Coarse vector (ndof,) T^T f: nodal forces (n, 3) of the block groups as their sums
@@ -338,12 +346,7 @@ class BlockCoarse:
         dq_k = op["solve"](self._project(op, d.res, rpres)[idx])
         dlam = 0.0
         if tc is not None:
-            prp = d.rpP.copy()                                 # tied nodes' share: see residual
-            for p in range(nr):
-                tn = d.rpnodes[d.rpptr[p]:d.rpptr[p + 1]]
-                prp[p, :3] += d.P[tn].sum(axis=0)
-                prp[p, 3:] += np.cross(d.X[tn] - d.rpX[p], d.P[tn]).sum(axis=0)
-            b = op["solve"](self._project(op, d.P, prp)[idx])
+            b = op["b"]
             tb = tc[idx] @ b
             if tb != 0.0:
                 dlam = -(tc[idx] @ dq_k) / tb
@@ -360,11 +363,13 @@ class BlockCoarse:
         # the step of a linear coarse model, scaled back while it raises the potential energy
         U0, rpU0 = d.U.copy(), d.rpU.copy()
         self.n_corrections += 1
+        pi0 = None
         for step in (1.0, 0.5, 0.25):
             lam_new = lam + step * dlam
             d.U[:], d.rpU[:] = U0, rpU0
             R.place_rigid_nodes(d)
-            pi0 = self.potential(lam_new)
+            if pi0 is None or dlam != 0.0:  # the reference energy depends on the load factor
+                pi0 = self.potential(lam_new)
             d.U[nodes] += step * du
             d.rpU[:] += step * drp
             R.place_rigid_nodes(d)

@@ -1,7 +1,30 @@
-"""What every scene does after its run: close the result, write the curve (PNG + CSV) and VTK."""
+"""What every scene script does around its run: parse its parameters, summarise the solver's
+work, close the result and write the curve (PNG + CSV) and VTK."""
 import os
 
 import numpy as np
+
+from .params import parse_overrides
+
+
+def scene_params(defaults, fast, argv, doc):
+    """Parameters of a scene's ``main``: ``key=value`` overrides of ``defaults``, on top of the
+    ``fast`` preset when ``fast=true``; ``h5`` next to ``out`` and the progress bar on."""
+    params = parse_overrides(defaults, argv, doc)
+    if params["fast"]:                  # the preset first, explicit overrides on top
+        params = parse_overrides(dict(defaults, **fast), argv, doc)
+    params["h5"] = params["out"] + ".h5"
+    params["progress"] = True
+    return params
+
+
+def solver_summary(hist, rows):
+    """Damage maxima at the end, iterations per increment over ``rows`` (bool mask) and the
+    relaxation time of a run's history, as one phrase."""
+    return (f"max joint damage {hist['max_joint_damage'][-1]:.2f}, block dt "
+            f"{hist['max_dt'][-1]:.2f}, dc {hist['max_dc'][-1]:.2f}; iterations per increment "
+            f"{np.mean(hist['iterations'][rows]):.0f} (max {np.max(hist['iterations'][rows]):.0f});"
+            f" relaxation time {np.sum(hist['time_s']):.1f} s")
 
 
 def finish(sim, out, x, y, xlabel, ylabel, title, reference=None, vtk=True):

@@ -28,7 +28,6 @@ of the previous stage up to the stage's last frame. This stays exact when the so
 increment into sub-increments (each one a history row).
 """
 import csv
-import importlib
 import itertools
 import os
 import re
@@ -123,14 +122,8 @@ def grid(**axes):
 
 def load_case(scene):
     """The module ``dr_masonry.cases.<scene>``; ParameterError if unknown or without ``CURVE``."""
-    try:
-        mod = importlib.import_module(f"dr_masonry.cases.{scene}")
-    except ModuleNotFoundError as e:
-        if e.name != f"dr_masonry.cases.{scene}":
-            raise
-        from .cli import available_cases
-        raise ParameterError(f"unknown case {scene!r}; available: "
-                             f"{', '.join(available_cases())}") from None
+    from .cli import import_case
+    mod = import_case(scene)
     missing = [a for a in ("PARAMS", "run", "CURVE") if not hasattr(mod, a)]
     if missing:
         raise ParameterError(f"case {scene!r} cannot run in a study: it has no {missing} "
