@@ -65,7 +65,8 @@ class SolverOptions:
     coarse : two-level relaxation: a Galerkin coarse correction on the blocks' affine motions
         (:mod:`dr_masonry.coarse`) before every span of ``coarse_every`` iterations; True, False
         or "auto" (default: on for models of at least ``COARSE_MIN_BLOCKS`` movable blocks, where
-        it saves 2-6 x the iterations before the peak; on a few blocks it only adds work, BENCHMARKS.md)
+        it saves 2-6 x the iterations before the peak; on a few blocks it only adds work,
+        BENCHMARKS.md)
     progress : show a progress bar
     """
     damping: str = "viscous"
