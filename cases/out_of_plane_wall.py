@@ -36,7 +36,7 @@ from dr_masonry import (Combined, Displacement, Indirect, JointLaw, PlasticDamag
 from dr_masonry.cases import squat_wall
 from dr_masonry.geometry import plane_nodes
 from dr_masonry.protocols import S6
-from dr_masonry.scene import finish, scene_params, solver_summary
+from dr_masonry.scene import finish, run_stages, scene_params, solver_summary
 from dr_masonry.units import MPa, kN, mm
 
 PARAMS = dict(
@@ -57,6 +57,7 @@ PARAMS = dict(
     damping="viscous",
     coarse=True,            # two-level relaxation (SolverOptions.coarse)
     frames=5,               # write a field frame every this many increments
+    resume=False,           # continue the run stored in out.h5 from its last checkpoint
     fast=False,             # preset FAST: tiny 0.88 x 0.81 m coarse wall, few increments
     out="results/out_of_plane_wall",
 )
@@ -108,7 +109,7 @@ def build(params):
 def run(params):
     """Run; returns (simulation, history with a ``lateral_force`` column (N), push mask)."""
     sim, stages = build(params)
-    hist = sim.run(stages)
+    hist = run_stages(sim, stages, params)
     push = hist["increment"] > stages[0].increments
     hist["lateral_force"] = np.where(push, hist["lambda"], 0.0)
     return sim, hist, push

@@ -41,7 +41,7 @@ from dr_masonry.geometry import BrickSpec, add_beam, add_foundation, add_wall, p
 from dr_masonry.loading import Gravity
 from dr_masonry.params import ParameterError
 from dr_masonry.protocols import S5
-from dr_masonry.scene import finish, scene_params, solver_summary
+from dr_masonry.scene import finish, run_stages, scene_params, solver_summary
 from dr_masonry.units import MPa, kN, mm
 
 PARAMS = dict(
@@ -65,6 +65,7 @@ PARAMS = dict(
     damping="viscous",
     coarse=True,            # two-level relaxation (SolverOptions.coarse)
     frames=5,               # write a field frame every this many increments
+    resume=False,           # continue the run stored in out.h5 from its last checkpoint
     fast=False,             # preset FAST: tiny 0.88 x 0.81 m coarse wall, few increments
     out="results/squat_wall",
 )
@@ -185,7 +186,7 @@ def build(params, protocol=S5):
 def run(params, protocol=S5):
     """Run; returns (simulation, history, push-stage mask (bool array))."""
     sim, stages = build(params, protocol)
-    hist = sim.run(stages)
+    hist = run_stages(sim, stages, params)
     return sim, hist, hist["increment"] > stages[0].increments
 
 

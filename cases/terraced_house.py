@@ -44,7 +44,7 @@ from dr_masonry.geometry import BrickSpec, HouseParams, terraced_house
 from dr_masonry.loading import Gravity
 from dr_masonry.params import ParameterError
 from dr_masonry.protocols import S7
-from dr_masonry.scene import finish, scene_params, solver_summary
+from dr_masonry.scene import finish, run_stages, scene_params, solver_summary
 from dr_masonry.units import kN, mm
 
 PARAMS = dict(
@@ -62,6 +62,7 @@ PARAMS = dict(
     damping="viscous",
     coarse=True,            # two-level relaxation (SolverOptions.coarse)
     frames=5,               # write a field frame every this many increments
+    resume=False,           # continue the run stored in out.h5 from its last checkpoint
     fast=False,             # preset FAST: small coarse house of large blocks, few increments
     out="results/terraced_house",
 )
@@ -143,7 +144,7 @@ def build(params):
 def run(params):
     """Run; returns (simulation, history with ``base_shear`` (N, whole house), push mask)."""
     sim, stages = build(params)
-    hist = sim.run(stages)
+    hist = run_stages(sim, stages, params)
     push = hist["increment"] > stages[0].increments
     hist["base_shear"] = np.where(push, 2.0 * len(sim.floors) * hist["lambda"], 0.0)
     return sim, hist, push

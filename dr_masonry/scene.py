@@ -18,6 +18,31 @@ def scene_params(defaults, fast, argv, doc):
     return params
 
 
+#: parameters that may differ when a run is continued: how it is solved and written, not what
+SOLVER_KEYS = {"resume", "progress", "out", "h5", "frames", "tol", "damping", "coarse", "solver"}
+
+
+def run_stages(sim, stages, params):
+    """``sim.run(stages)``; with ``params["resume"]``, continue ``params["h5"]`` from its last
+    checkpoint instead (the stored run's parameters must equal ``params`` apart from
+    :data:`SOLVER_KEYS`)."""
+    if params.get("resume"):
+        from .params import ParameterError
+        from .results import open_result
+        path = params["h5"]
+        if not os.path.exists(path):
+            raise ParameterError(f"parameter resume=true: no result file {path} to continue")
+        stored = open_result(path).config
+        changed = sorted(k for k in set(stored) & set(params) - SOLVER_KEYS
+                         if stored[k] != params[k])
+        if changed:
+            raise ParameterError(f"parameter resume=true: {path} was run with "
+                                 + ", ".join(f"{k}={stored[k]!r}" for k in changed)
+                                 + "; continue it with the same parameters")
+        sim.resume(path)
+    return sim.run(stages)
+
+
 def solver_summary(hist, rows):
     """Damage maxima at the end, iterations per increment over ``rows`` (bool mask) and the
     relaxation time of a run's history, as one phrase."""

@@ -134,6 +134,8 @@ class Simulation:
         self._built = False
         self.coarse = None
         self._resuming = False
+        self._checkpoint_stage = None
+        self.stage_position = None
         self._warned = set()
         self.history = {}
         self.increment = 0
@@ -413,7 +415,11 @@ class Simulation:
 
     # ------------------------------------------------------------------ running
     def run(self, stages):
-        """Run the stages; returns the history (dict of arrays). Raises SolverError on failure."""
+        """Run the stages; returns the history (dict of arrays). Raises SolverError on failure.
+
+        After :meth:`resume`, ``stages`` must be the original run's stages: those finished before
+        the checkpoint are skipped and the stage in progress continues where it stopped.
+        """
         if not self._built:
             self.build()
         for stage in stages:  # register every prescribed node set so history columns stay fixed
@@ -421,15 +427,18 @@ class Simulation:
                 if isinstance(ctl, (L.Displacement, L.Indirect)) and isinstance(ctl.target, L.NodeSet):
                     k = L.dof_index(ctl.dof, rotations=False)
                     self.presc[(ctl.target.name, k)] = (ctl.target.nodes, k)
+        k0, i0, starts = self._resume_position(stages) if self._resuming else (0, 0, None)
+        self._resuming = False
         try:
             from tqdm.auto import tqdm
         except ImportError:  # pragma: no cover
             tqdm = None
-        total = sum(s.increments for s in stages)
+        total = sum(s.increments for s in stages[k0:]) - i0
         bar = tqdm(total=total, disable=not self.options.progress, unit="incr") if tqdm else None
         try:
-            for stage in stages:
-                self._run_stage(stage, bar)
+            for k, stage in enumerate(stages[k0:], start=k0):
+                self.stage_position = (k, 0, None, len(stages), stage.increments)
+                self._run_stage(stage, bar, *((i0, starts) if k == k0 else (0, None)))
         finally:
             if bar is not None:
                 bar.close()
@@ -437,30 +446,76 @@ class Simulation:
                 self.writer.flush()
         return {k: np.asarray(v) for k, v in self.history.items()}
 
+    def _resume_position(self, stages):
+        """(stage index, increments of it done, its controls' start values) of the checkpoint.
+
+        Checkpoints store their position; for older files it is found from the number of
+        increments, checked against the prescribed paths (a run whose increments were cut, or
+        stopped inside a ramp, cannot be located that way and is refused).
+        """
+        pos = self._checkpoint_stage
+        if pos is not None:
+            k, i, starts, n_stages, n = pos
+            if k == n_stages - 1 and i == n:   # a finished run: the stages given come after it
+                return 0, 0, None
+            if k >= len(stages) or i > stages[k].increments:
+                raise L.LoadingError(f"resume {self.output}: the checkpoint is at increment {i} of "
+                                     f"stage {k}, the stages given have fewer (not the same run)")
+            return k, i, {tuple(key): v for key, v in starts}
+        done = self.increment
+        for k, stage in enumerate(stages):
+            if done <= stage.increments:
+                break
+            done -= stage.increments
+        else:
+            raise L.LoadingError(f"resume {self.output}: the checkpoint is after {self.increment} "
+                                 f"increments, the stages given have fewer (not the same run)")
+        starts = {}
+        for ctl in stage.controls:
+            key = self._key(ctl)
+            now = self.values.get(key, 0.0)
+            if ctl.path is None and ctl.to is not None and done < stage.increments:
+                raise L.LoadingError(f"resume {self.output}: the file has no stage position and "
+                                     f"stopped inside the ramp of control {ctl.label}")
+            starts[key] = now
+            if ctl.path is not None and done and not np.isclose(ctl.path[done - 1], now, rtol=1e-9,
+                                                                atol=1e-15):
+                raise L.LoadingError(f"resume {self.output}: control {ctl.label} is at {now:.6g}, "
+                                     f"not at the value of increment {done} of stage "
+                                     f"{stage.name!r} (cut increments: the file has no stage "
+                                     f"position)")
+        return k, done, starts
+
     def close(self):
         """Close the result file."""
         if self.writer is not None:
             self.writer.close()
             self.writer = None
 
-    def _run_stage(self, stage, bar):
+    def _run_stage(self, stage, bar, first=0, starts=None):
+        """Run the increments ``first`` ... of ``stage``; ``starts``: the controls' values at the
+        stage's start when it is continued from a checkpoint."""
         n = stage.increments
         targets = {}
         indirect = None
         for ctl in stage.controls:
             key = self._key(ctl)
-            start = self.values.get(key, 0.0)
+            start = starts[key] if starts is not None else self.values.get(key, 0.0)
             targets[key] = (ctl, ctl.values(start, n))
             if isinstance(ctl, L.Indirect):
                 indirect = ctl
-                if self.factors.get(ctl.pattern.name) is not None:
+                if first == 0 and self.factors.get(ctl.pattern.name) is not None:
                     self.lam[0] = self.factors[ctl.pattern.name]
                 self._pattern(ctl.pattern)
+        k, n_stages = self.stage_position[0], self.stage_position[3]
+        start_values = [[list(key), float(starts[key] if starts is not None else
+                                          self.values.get(key, 0.0))] for key in targets]
         self.stage_name = stage.name
         self.stage_indirect = indirect
-        for i in range(n):
+        for i in range(first, n):
             goal = {key: vals[i] for key, (ctl, vals) in targets.items()}
             self._increment(stage, targets, goal, indirect, depth=0)
+            self.stage_position = (k, i + 1, start_values, n_stages, n)
             if (i + 1) % stage.frames == 0 or i == n - 1:
                 self._write_frame()
             if bar is not None:
@@ -719,7 +774,8 @@ class Simulation:
                       du_prev=self.du_prev if self.du_prev is not None else np.zeros(0))
         meta = {"values": [[list(k), v] for k, v in self.values.items()],
                 "factors": self.factors, "energy": self.energy, "dctl_prev": self.dctl_prev,
-                "history": {k: v for k, v in self.history.items()}, "patterns": []}
+                "history": {k: v for k, v in self.history.items()}, "patterns": [],
+                "stage": list(self.stage_position) if self.stage_position else None}
         for name, (pat, P, rpP) in self.patterns.items():
             arrays[f"pattern_P/{name}"] = P
             arrays[f"pattern_rpP/{name}"] = rpP
@@ -731,8 +787,10 @@ class Simulation:
 
         The simulation must be set up as the original one (same model, supports and reference
         points, e.g. from the scene's ``build``); later rows and frames of the file are dropped and
-        the next :meth:`run` appends to it. Stages passed to ``run`` continue from the restored
-        state: controls keep their values, patterns their factors.
+        the next :meth:`run` appends to it. If the stored run stopped before its end, ``run``
+        must get the same stages and continues the one in progress; after a finished run, the
+        stages given run after it from the restored state (controls keep their values, patterns
+        their factors).
         """
         if self._built:
             raise L.LoadingError("resume() must be called before the first run")
@@ -762,6 +820,7 @@ class Simulation:
         self.factors = dict(meta["factors"])
         self.energy = dict(meta["energy"])
         self.dctl_prev = meta["dctl_prev"]
+        self._checkpoint_stage = meta.get("stage")
         self.history = {k: list(v) for k, v in meta["history"].items()}
         for name in meta["patterns"]:
             stored = L.StoredPattern(name, arrays[f"pattern_P/{name}"], arrays[f"pattern_rpP/{name}"])

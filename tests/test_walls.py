@@ -187,3 +187,30 @@ def test_main_writes_outputs(tmp_path):
         assert (tmp_path / ("s5" + suffix)).exists()
     assert (tmp_path / "s5_vtk").is_dir()
     assert math.isfinite(np.loadtxt(str(out) + ".csv", delimiter=",", skiprows=1)[-1, 0])
+
+
+def test_interrupted_run_resumes(tmp_path, monkeypatch, squat):
+    """A run interrupted inside its push stage and continued with ``resume=true`` ends where the
+    uninterrupted run ends, with every row once; changed parameters are refused."""
+    from dr_masonry.solver import Simulation
+    from dr_masonry.results import open_result
+    _, whole, _ = squat
+    params = dict(tiny(squat_wall), h5=str(tmp_path / "s5.h5"), frames=1)
+    commit = Simulation._commit
+
+    def stop_after_9(self, *args):
+        commit(self, *args)
+        if self.increment == 9:
+            raise KeyboardInterrupt
+    monkeypatch.setattr(Simulation, "_commit", stop_after_9)
+    with pytest.raises(KeyboardInterrupt):
+        squat_wall.run(params)
+    monkeypatch.setattr(Simulation, "_commit", commit)
+    assert open_result(params["h5"]).n_history == 9
+    with pytest.raises(ParameterError, match="sigma="):
+        squat_wall.run(dict(params, resume=True, sigma=0.2e6))
+    sim, hist, push = squat_wall.run(dict(params, resume=True))
+    sim.close()
+    assert np.array_equal(hist["increment"], whole["increment"])
+    assert np.allclose(hist["beam.fx"], whole["beam.fx"], rtol=1e-3, atol=1.0)
+    assert open_result(params["h5"]).n_history == whole["increment"].size
