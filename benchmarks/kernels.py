@@ -80,9 +80,9 @@ def hex_args(sim, U, elastic):
     params = mat.params_array()[None, :]
     s0 = np.repeat(np.repeat(mat.initial_state()[None, None, :], me.conn.shape[0], 0), 8, 1)
     emat = np.zeros(me.conn.shape[0], dtype=np.int64)
-    return (U, me.conn, np.arange(me.conn.shape[0], dtype=np.int64), me.dN, me.wdet, me.h, emat,
-            params, s0, s0.copy(), np.zeros((me.conn.shape[0], 8, 3)), np.zeros(me.conn.shape[0]),
-            me.geo)
+    return (U, me.conn, np.arange(me.conn.shape[0], dtype=np.int64), me.dN, me.geo, me.wdet, me.h,
+            emat, params, s0, s0.copy(), np.zeros((me.conn.shape[0], 8, 3)),
+            np.zeros(me.conn.shape[0]))
 
 
 def contact_args(sim, U):
@@ -142,7 +142,7 @@ def steady(params):
                                        ("hex reference, plastic+damaged", False, PLASTIC_STRAIN)):
             args = hex_args(sim, displacement(sim, strain, 0.0), elastic)
             hex_forces(*args)
-            s_new = args[9]
+            s_new = args[10]
             frac = float(np.mean((s_new[:, :, MS_DT] > 0) | (s_new[:, :, MS_DC] > 0))) if not elastic else 0.0
             cases.append((label, hex_forces, args, ne, "element-step", frac))
         for label, jump in (("contact, joints elastic", JUMP_ELASTIC),

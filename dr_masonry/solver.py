@@ -237,7 +237,7 @@ class Simulation:
                          np.zeros((conn.shape[0], 8, 3)), np.zeros(conn.shape[0]), ptr, rows)
         self.mass = lumped_mass(conn, wdet, rho, n)  # physical, kg
         a = active
-        rowsum = stiffness_rowsum(conn[a], dN, wdet[a], E[a], nu[a], n, geo[a])
+        rowsum = stiffness_rowsum(conn[a], dN, geo[a], wdet[a], E[a], nu[a], n)
         c = m.contacts
         laws = m.joint_laws
         if c.n:

@@ -8,7 +8,8 @@ Conventions
 * ``dN`` (nt, 8, 8, 3) 1/m: dN_a/dX_i in the reference configuration, indexed
   [table, gauss point, node, direction]; element e reads table ``geo[e]``. Elements equal up to
   a translation (the bricks of a wall) share one table, found by :func:`hex_geometry_shared`;
-  :func:`hex_geometry` gives one table per element (``geo = arange(ne)``).
+  :func:`hex_geometry` gives one table per element (``geo = arange(ne)``, for tests and
+  reference solutions).
   ``wdet`` (ne, 8) m^3: Gauss weight x det(dX/dxi), per element.
 * Deformation gradient F = I + sum_a u_a (x) dN_a; Green-Lagrange strain
   E = (H + H^T + H^T H) / 2 with H = F - I (no cancellation at small strain), Voigt order
@@ -136,7 +137,8 @@ def _tables(X, conn, elems):
 
 
 def hex_geometry(X, conn):
-    """Reference-configuration geometry of hexahedra at the 2x2x2 Gauss points, one table each.
+    """Reference-configuration geometry of hexahedra at the 2x2x2 Gauss points, one table each
+    (:func:`hex_geometry_shared` without the sharing).
 
     Parameters
     ----------
@@ -148,8 +150,9 @@ def hex_geometry(X, conn):
     Returns
     -------
     dN : (ne, 8, 8, 3) float64, 1/m
-        dN_a/dX_i [element, gauss point, node, direction] (``geo = arange(ne)`` for
-        :func:`hex_forces`).
+        dN_a/dX_i [element, gauss point, node, direction].
+    geo : (ne,) int64
+        ``arange(ne)``: element e reads table e.
     wdet : (ne, 8) float64, m^3
         Gauss weight x det J (sums to the element volume).
     h : (ne,) float64, m
@@ -161,7 +164,9 @@ def hex_geometry(X, conn):
         on malformed input or a non-positive Jacobian at a Gauss point (names the element).
     """
     X, conn = _check_mesh(X, conn)
-    return _tables(X, conn, np.arange(conn.shape[0]))
+    geo = np.arange(conn.shape[0], dtype=np.int64)
+    dN, wdet, h = _tables(X, conn, geo)
+    return dN, geo, wdet, h
 
 
 def hex_geometry_shared(X, conn):
@@ -251,8 +256,8 @@ def hex_add_gauss_force(F, sig, dng, w, fe):
 
 
 @pjit
-def hex_forces(U, conn, active, dN, wdet, h, elem_mat, params, s_old, s_new, f_elem, energy,
-               geo=None):
+def hex_forces(U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old, s_new, f_elem,
+               energy):
     """Internal forces and stored elastic energy of the ``active`` elements (parallel, race-free).
 
     Parameters
@@ -263,8 +268,9 @@ def hex_forces(U, conn, active, dN, wdet, h, elem_mat, params, s_old, s_new, f_e
         node ids per element.
     active : (na,) int64
         element ids to compute; other elements are untouched.
-    dN, wdet, h
-        from :func:`hex_geometry_shared` (with ``geo``) or :func:`hex_geometry`.
+    dN, geo, wdet, h
+        from :func:`hex_geometry_shared` or :func:`hex_geometry`: element e reads table
+        ``dN[geo[e]]``.
     elem_mat : (ne,) int64
         row of ``params`` for each element.
     params : (nmat, NMP) float64
@@ -278,11 +284,7 @@ def hex_forces(U, conn, active, dN, wdet, h, elem_mat, params, s_old, s_new, f_e
     energy : (ne,) float64, J
         stored elastic energy sum_g wdet 0.5 S : (E - E_p), written (E_p = 0 for a
         material with ``p[MP_ELASTIC] == 1``).
-    geo : (ne,) int64 or None
-        derivative table of each element; None: ``dN`` has one table per element.
     """
-    if geo is None and dN.shape[0] != conn.shape[0]:
-        raise ValueError("hex_forces: dN has not one table per element; pass geo")
     na = active.shape[0]
     nchunk = (na + _CHUNK - 1) // _CHUNK
     for c in prange(nchunk):
@@ -300,10 +302,7 @@ def hex_forces(U, conn, active, dN, wdet, h, elem_mat, params, s_old, s_new, f_e
                     fe[a, i] = 0.0
             p = params[elem_mat[e]]
             plastic = p[MP_ELASTIC] != 1.0
-            if geo is None:
-                dne = dN[e]
-            else:
-                dne = dN[geo[e]]
+            dne = dN[geo[e]]
             en = 0.0
             for g in range(8):
                 dng = dne[g]
@@ -380,7 +379,7 @@ def _stiffness_rowsum_elem(dN, geo, wdet, E, nu, r):
             r[e, a] = best
 
 
-def stiffness_rowsum(conn, dN, wdet, E, nu, n_nodes, geo=None):
+def stiffness_rowsum(conn, dN, geo, wdet, E, nu, n_nodes):
     """Gershgorin bound of the assembled linear stiffness per node (N/m), shape (n_nodes,).
 
     For each element, the absolute row sums of its 24x24 reference stiffness, max over the
@@ -389,7 +388,7 @@ def stiffness_rowsum(conn, dN, wdet, E, nu, n_nodes, geo=None):
     element.
     """
     ne = wdet.shape[0]
-    geo = np.arange(ne) if geo is None else np.ascontiguousarray(geo, dtype=np.int64)
+    geo = np.ascontiguousarray(geo, dtype=np.int64)
     if geo.shape != (ne,) or (ne and (geo.min() < 0 or geo.max() >= dN.shape[0])):
         raise HexMeshError(f"geo must be ({ne},) table ids in [0, {dN.shape[0]}), got shape "
                            f"{geo.shape}")

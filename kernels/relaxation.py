@@ -106,8 +106,8 @@ def internal_forces(mesh, cont, dyn):
     dyn.fint[:] = 0.0
     e = 0.0
     if mesh.active.shape[0] > 0:
-        hex_forces(dyn.U, mesh.conn, mesh.active, mesh.dN, mesh.wdet, mesh.h, mesh.emat,
-                   mesh.mparams, mesh.s_old, mesh.s_new, mesh.fbuf, mesh.energy, mesh.geo)
+        hex_forces(dyn.U, mesh.conn, mesh.active, mesh.dN, mesh.geo, mesh.wdet, mesh.h, mesh.emat,
+                   mesh.mparams, mesh.s_old, mesh.s_new, mesh.fbuf, mesh.energy)
         gather_add(mesh.fbuf.reshape((-1, 3)), mesh.ptr, mesh.rows, dyn.fint)
         for q in range(mesh.active.shape[0]):
             e += mesh.energy[mesh.active[q]]

@@ -19,7 +19,7 @@ from dr_masonry.kernels.hex8 import hex_geometry, hex_stiffness
 def hex_matrix(model):
     """Global stiffness (3 n, 3 n) of the hexahedra of the non-fixed blocks, N/m (CSR)."""
     X, conn = model.nodes, model.elements
-    dN, wdet, _ = hex_geometry(X, conn)
+    dN, _, wdet, _ = hex_geometry(X, conn)
     mats = model.materials
     emat = model.block_material[model.element_block]
     rows, cols, vals = [], [], []

@@ -52,8 +52,8 @@ def run_forces(U, X, conn, E, nu, elem_mat=None, params=None):
     s_new = np.zeros((ne, 8, NMS))
     f_elem = np.full((ne, 8, 3), np.nan)
     energy = np.full(ne, np.nan)
-    hex8.hex_forces(np.ascontiguousarray(U, dtype=float), conn, np.arange(ne), dN, wdet, h,
-                    elem_mat, params, s_old, s_new, f_elem, energy, geo)
+    hex8.hex_forces(np.ascontiguousarray(U, dtype=float), conn, np.arange(ne), dN, geo, wdet, h,
+                    elem_mat, params, s_old, s_new, f_elem, energy)
     ptr, idx = node_row_map(conn, X.shape[0])
     f_node = np.empty_like(X)
     f_node[:] = 0.0
@@ -87,7 +87,7 @@ def rotation(axis, angle):
 
 
 def assemble_K(X, conn, E, nu):
-    dN, wdet, _ = hex8.hex_geometry(X, conn)
+    dN, _, wdet, _ = hex8.hex_geometry(X, conn)
     ke = np.empty((24, 24))
     rows, cols, vals = [], [], []
     for e in range(conn.shape[0]):
@@ -109,7 +109,8 @@ def test_corner_table_matches_model():
 def test_geometry_against_reference_and_closed_forms():
     rng = np.random.default_rng(1)
     xe = distorted_element(rng)
-    dN, wdet, h = hex8.hex_geometry(xe, np.arange(8)[None])
+    dN, geo, wdet, h = hex8.hex_geometry(xe, np.arange(8)[None])
+    assert np.array_equal(geo, [0])
     dn_ref, wd_ref = nv.geometry(xe)
     assert np.allclose(dN[0], dn_ref, rtol=0, atol=1e-13)
     _, vol = face_integrals(xe)
@@ -119,7 +120,7 @@ def test_geometry_against_reference_and_closed_forms():
     assert np.abs(dN[0].sum(axis=1)).max() < 1e-13
     assert np.allclose(np.einsum("ai,gaj->gij", xe, dN[0]), np.eye(3), atol=1e-13)
     # box: det J = V / 8 at every point
-    _, wb, hb = hex8.hex_geometry(0.5 * (HEX_NATURAL + 1) * [2.0, 3.0, 4.0], np.arange(8)[None])
+    _, _, wb, hb = hex8.hex_geometry(0.5 * (HEX_NATURAL + 1) * [2.0, 3.0, 4.0], np.arange(8)[None])
     assert np.allclose(wb, 3.0) and hb[0] == pytest.approx(24.0 ** (1 / 3))
 
 
@@ -170,11 +171,11 @@ def test_damaging_material_below_cracking_is_elastic():
     X, conn = 0.05 * distorted_element(rng), np.arange(8, dtype=np.int64)[None]  # h < h_max
     mat = PlasticDamage(E=5e9, nu=0.15, density=1800.0)
     U = rng.uniform(-5e-7, 5e-7, X.shape)
-    dN, wdet, h = hex8.hex_geometry(X, conn)
+    dN, geo, wdet, h = hex8.hex_geometry(X, conn)
     s_old = np.tile(mat.initial_state(), (1, 8, 1))
     s_new = np.full_like(s_old, np.nan)
     f_elem, energy = np.empty((1, 8, 3)), np.empty(1)
-    hex8.hex_forces(U, conn, np.array([0]), dN, wdet, h, np.zeros(1, np.int64),
+    hex8.hex_forces(U, conn, np.array([0]), dN, geo, wdet, h, np.zeros(1, np.int64),
                     mat.params_array()[None, :], s_old, s_new, f_elem, energy)
     f_ref, en_ref, _, _ = nv.element_forces(X, U, 5e9, 0.15)
     assert np.abs(f_elem[0] - f_ref).max() <= 1e-10 * np.abs(f_ref).max()
@@ -193,8 +194,8 @@ def test_inactive_elements_untouched():
     energy = np.full(ne, -7.0)
     s_old, s_new = np.zeros((ne, 8, NMS)), np.full((ne, 8, NMS), -7.0)
     active = np.array([4, 1], dtype=np.int64)
-    hex8.hex_forces(rng.normal(0, 1e-3, X.shape), conn, active, dN, wdet, h,
-                    np.zeros(ne, np.int64), params, s_old, s_new, f_elem, energy, geo)
+    hex8.hex_forces(rng.normal(0, 1e-3, X.shape), conn, active, dN, geo, wdet, h,
+                    np.zeros(ne, np.int64), params, s_old, s_new, f_elem, energy)
     idle = np.setdiff1d(np.arange(ne), active)
     assert np.all(f_elem[idle] == -7.0) and np.all(energy[idle] == -7.0)
     assert np.all(s_new[idle] == -7.0)
@@ -284,7 +285,7 @@ def test_shared_tables_match_per_element_tables():
     X, conn, n_tables = _mixed_mesh(rng)
     ne = conn.shape[0]
     dN, geo, wdet, h = hex8.hex_geometry_shared(X, conn)
-    dNe, wde, he = hex8.hex_geometry(X, conn)
+    dNe, geoe, wde, he = hex8.hex_geometry(X, conn)
     assert dN.shape == (n_tables, 8, 8, 3) and geo.shape == (ne,) and geo.dtype == np.int64
     assert np.unique(geo[:24].reshape(4, 3, 2)[:2]).size == 1  # the boxes (x index < 2)
     assert geo[-4] == geo[-3] == geo[-2] != geo[-1]
@@ -298,9 +299,9 @@ def test_shared_tables_match_per_element_tables():
     s_old = np.ascontiguousarray(np.repeat(s0[:, None, :], 8, axis=1))
     U = rng.uniform(-2e-6, 2e-6, X.shape)
     out = []
-    for d, w, hh, g in ((dN, wdet, h, geo), (dNe, wde, he, None)):
+    for d, g, w, hh in ((dN, geo, wdet, h), (dNe, geoe, wde, he)):
         f, en, sn = np.full((ne, 8, 3), np.nan), np.full(ne, np.nan), np.full_like(s_old, -1.0)
-        hex8.hex_forces(U, conn, np.arange(ne), d, w, hh, elem_mat, params, s_old, sn, f, en, g)
+        hex8.hex_forces(U, conn, np.arange(ne), d, g, w, hh, elem_mat, params, s_old, sn, f, en)
         out.append((f, en, sn))
     (f, en, sn), (fe, ene, sne) = out
     assert np.abs(f - fe).max() <= 1e-12 * np.abs(fe).max()
@@ -324,13 +325,6 @@ def test_shared_geometry_input_errors():
         hex8.hex_geometry_shared(X, conn[:, :7])
     dN, geo, wdet, h = hex8.hex_geometry_shared(X, conn[:0])
     assert dN.shape == (0, 8, 8, 3) and geo.shape == (0,) and wdet.shape == (0, 8)
-    # shared tables without geo are refused (not read out of bounds)
-    dN, geo, wdet, h = hex8.hex_geometry_shared(X, conn)
-    ne = conn.shape[0]
-    with pytest.raises(ValueError, match="geo"):
-        hex8.hex_forces(np.zeros_like(X), conn, np.arange(ne), dN, wdet, h, np.zeros(ne, np.int64),
-                        elastic_params(1e9, 0.2)[None, :], np.zeros((ne, 8, NMS)),
-                        np.zeros((ne, 8, NMS)), np.zeros((ne, 8, 3)), np.zeros(ne))
 
 
 # ---------------------------------------------------------------------------- stiffness
@@ -339,7 +333,7 @@ def test_stiffness_is_jacobian_of_forces():
     xe = distorted_element(rng)
     E, nu = 1e10, 0.3
     conn = np.arange(8, dtype=np.int64)[None]
-    dN, wdet, _ = hex8.hex_geometry(xe, conn)
+    dN, _, wdet, _ = hex8.hex_geometry(xe, conn)
     ke = np.empty((24, 24))
     hex8.hex_stiffness(dN[0], wdet[0], E, nu, ke)
     assert np.allclose(ke, nv.element_stiffness(xe, E, nu), rtol=0, atol=1e-12 * np.abs(ke).max())
@@ -393,23 +387,23 @@ def test_gershgorin_bound_brackets_max_eigenvalue():
     dN, geo, wdet, _ = hex8.hex_geometry_shared(X, conn)
     ne = conn.shape[0]
     assert dN.shape[0] == 1 + 8  # the 4 boxes at x < 0.5 m, then 8 distorted elements
-    bound = hex8.stiffness_rowsum(conn, dN, wdet, np.full(ne, E), np.full(ne, nu), X.shape[0], geo)
+    bound = hex8.stiffness_rowsum(conn, dN, geo, wdet, np.full(ne, E), np.full(ne, nu), X.shape[0])
     K = assemble_K(X, conn, E, nu)
     rows = np.asarray(abs(K).sum(axis=1)).ravel().reshape(-1, 3)
     assert np.all(rows <= bound[:, None] * (1 + 1e-12))
     lmax = spla.eigsh(K, k=1, which="LA", return_eigenvectors=False)[0]
     assert lmax <= bound.max() <= 3.0 * lmax
     with pytest.raises(ValueError, match="nu"):
-        hex8.stiffness_rowsum(conn, dN, wdet, np.full(ne, E), np.full(ne, 0.5), X.shape[0], geo)
+        hex8.stiffness_rowsum(conn, dN, geo, wdet, np.full(ne, E), np.full(ne, 0.5), X.shape[0])
     with pytest.raises(ValueError, match="geo"):
-        hex8.stiffness_rowsum(conn, dN, wdet, np.full(ne, E), np.full(ne, nu), X.shape[0], geo + 9)
+        hex8.stiffness_rowsum(conn, dN, geo + 9, wdet, np.full(ne, E), np.full(ne, nu), X.shape[0])
 
 
 # ---------------------------------------------------------------------------- mass, gather
 def test_lumped_mass():
     rng = np.random.default_rng(4)
     X, conn = _patch_mesh(rng)
-    _, wdet, _ = hex8.hex_geometry(X, conn)
+    _, _, wdet, _ = hex8.hex_geometry(X, conn)
     rho = rng.uniform(1500, 2500, conn.shape[0])
     m = hex8.lumped_mass(conn, wdet, rho, X.shape[0])
     ref = np.zeros(X.shape[0])
@@ -420,7 +414,7 @@ def test_lumped_mass():
     assert np.allclose(m, ref, rtol=1e-12)
     assert m.sum() == pytest.approx(V, rel=1e-12)
     Xb = 0.5 * (HEX_NATURAL + 1) * [0.3, 0.2, 0.1]
-    _, wb, _ = hex8.hex_geometry(Xb, np.arange(8)[None])
+    _, _, wb, _ = hex8.hex_geometry(Xb, np.arange(8)[None])
     assert np.allclose(hex8.lumped_mass(np.arange(8)[None], wb, [2000.0], 8), 2000 * 0.006 / 8)
     with pytest.raises(ValueError, match="rho_elem"):
         hex8.lumped_mass(conn, wdet, -rho, X.shape[0])
