@@ -23,8 +23,9 @@ to ``benchmarks/out/stability/``. The iteration cap is lowered to ``max_iter`` p
 ``max_cuts`` halvings (bounded time); ``coarse`` sets ``SolverOptions.coarse``. Recorded per
 setting: ``status`` (completed, stopped by an exception, timeout, crash), the exception type
 and the first 120 characters of its message, ``guard`` (``unstable``: the non-finite/run-away
-guard; ``cap``: the increment did not converge within the cap) with the residual ratio it
-reported, ``nonfinite``: whether the history, the solver's displacements or the HDF5 file read
+guard; ``step``: the unstable-step detector of the viscous damping; ``cap``: the increment did
+not converge within the cap) with the residual ratio it reported, ``failed_after``: the
+iterations of the increment that failed, ``nonfinite``: whether the history, the solver's displacements or the HDF5 file read
 back by ``open_result`` (history and every frame) hold NaN or Inf (they must not), ``rows`` of
 history written (converged increments, halves of cut increments included) against the
 ``planned`` increments, iterations, wall time (s).
@@ -138,12 +139,15 @@ def one(params):
     opens, h5_finite = finite_result(sim.output)
     ratio = re.search(r"residual ratio ([-+0-9.eE]+|nan|inf)", msg)
     guard = ("unstable" if re.search(r"non-finite|run-away", msg) else
+             "step" if "unstable time step" in msg else
              "cap" if "did not converge" in msg else "")
+    spent = re.search(r"after (\d+) iterations", msg)
     print(json.dumps(dict(
         status="stopped" if exc else "completed", exception=exc, message=msg[:120], guard=guard,
         resid_ratio=float(ratio.group(1)) if ratio else float("nan"),
         nonfinite="NO" if finite and h5_finite else "YES", h5_opens=opens,
         rows=len(hist.get("increment", [])), planned=sum(s.increments for s in stages),
+        failed_after=int(spent.group(1)) if spent else 0,
         iterations=int(hist["iterations"].sum()) if "iterations" in hist else 0, wall_s=wall)))
 
 
@@ -180,8 +184,10 @@ def run_all(params, argv):
             print(f"  {scene} {change} {value:g}: {row['status']} {row.get('guard', '')} "
                   f"{row.get('message', '')[:90]} ({row['process_s']:.1f} s)", flush=True)
     keys = ["scene", "change", "value", "status", "exception", "message", "guard", "resid_ratio",
-            "nonfinite", "h5_opens", "rows", "planned", "iterations", "wall_s", "process_s"]
-    blank = dict(resid_ratio=float("nan"), rows=0, iterations=0, wall_s=float("nan"))
+            "nonfinite", "h5_opens", "rows", "planned", "iterations", "failed_after", "wall_s",
+            "process_s"]
+    blank = dict(resid_ratio=float("nan"), rows=0, iterations=0, failed_after=0,
+                 wall_s=float("nan"))
     rows = [{k: r.get(k, blank.get(k, "")) for k in keys} for r in rows]
     report(rows, "stability" + params["tag"],
            "Stability stress test (one change at a time from the defaults)")
@@ -195,6 +201,7 @@ def conclusion(rows):
     lines = [f"{len(rows)} settings: {sum(r['status'] == 'completed' for r in rows)} completed, "
              f"{sum(r['status'] == 'stopped' for r in rows)} stopped by an exception "
              f"({sum(r['guard'] == 'unstable' for r in rows)} by the non-finite/run-away guard, "
+             f"{sum(r['guard'] == 'step' for r in rows)} by the unstable-step detector, "
              f"{sum(r['guard'] == 'cap' for r in rows)} at the iteration cap)."]
     if bad:
         lines.append("NOT caught cleanly: " + "; ".join(

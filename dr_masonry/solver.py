@@ -579,6 +579,15 @@ class Simulation:
                        f"{node} (block {self.model.node_block[node]}) after {int(info[R.I_ITERS])} "
                        f"iterations; the time step is unstable (safety factor {o.safety}) or the "
                        f"structure lost equilibrium (collapse under load control)")
+        if status == R.ST_UNSTABLE:
+            self._restore(snap)
+            node = int(info[R.I_WORST])
+            self._fail(f"increment {self.increment + 1} of stage {stage.name!r}: unstable time step "
+                       f"after {int(info[R.I_ITERS])} iterations: the motion's stiffness-to-mass "
+                       f"ratio (omega dt)^2 = {info[R.I_QTY]:.3g} stayed above the central-"
+                       f"difference limit 4 (fastest node {node}, block "
+                       f"{self.model.node_block[node]}); the fictitious masses are too small for "
+                       f"the stiffness: raise SolverOptions.safety (now {o.safety})")
         if status == R.ST_MAXITER:
             self._restore(snap)
             if depth >= o.max_cuts:

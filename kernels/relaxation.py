@@ -47,6 +47,14 @@ ST_CONVERGED = 0
 ST_MAXITER = 1
 ST_NONFINITE = 2
 ST_RUNAWAY = 3
+ST_UNSTABLE = 4  # viscous damping: the motion's Rayleigh quotient stays above the stable limit
+
+#: (omega dt)^2 of the central-difference stability limit, with a 5 % margin for the geometric
+#: stiffness that the Gershgorin masses do not bound
+UNSTABLE_RQ = 4.2
+#: iterations above it (a count halved every UNSTABLE_WINDOW iterations) that stop an increment
+UNSTABLE_COUNT = 25
+UNSTABLE_WINDOW = 1000
 
 # layout of the info vector
 I_ITERS = 0
@@ -54,11 +62,12 @@ I_STATUS = 1
 I_RESID = 2      # ||r_free|| / reference force at exit
 I_KE = 3         # kinetic energy at exit (fictitious), J
 I_DAMPED = 4     # energy removed by the damping (node DOFs; kinetic: KE at resets), J
-I_WORST = 5      # node (or -1 - reference point) where the guard fired
-I_QTY = 6        # the offending value
+I_WORST = 5      # node (or -1 - reference point) where the guard fired (unstable: fastest node)
+I_QTY = 6        # the offending value (unstable: the Rayleigh quotient (omega dt)^2)
 I_REF = 7        # reference force norm, N
 I_EINT = 8       # stored energy (hexahedra + joints), J
-N_INFO = 9
+I_OVER = 9       # unstable-step count (read and written: it carries over the calls of an increment)
+N_INFO = 10
 
 
 @jit
@@ -187,7 +196,13 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, tol, ref_floor
         its own pattern load plus that of its tied nodes).
     scheme : int
         DAMP_* constant; ``alpha`` its parameter (local damping coefficient, the viscous
-        damping scale, or FIRE's initial mixing factor alpha_start).
+        damping scale, or FIRE's initial mixing factor alpha_start). With viscous damping the
+        Rayleigh quotient (omega dt)^2 = V.dF / V.M.V of the motion (central differences are
+        stable for (omega dt)^2 < 4) is checked every iteration but the first of a call (whose
+        dF holds the jump of the predictor or coarse correction): ``UNSTABLE_COUNT`` iterations
+        above ``UNSTABLE_RQ`` (the count ``info[I_OVER]`` halved every ``UNSTABLE_WINDOW``
+        iterations; an unstable step is held bounded by opening joints, so the quotient only
+        exceeds the limit now and then) stop the loop with ST_UNSTABLE.
     tol : float
         converged when ||r_free|| <= tol * max(reference, ref_floor).
     u_limit : float
@@ -214,6 +229,7 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, tol, ref_floor
     dt = FIRE_DT_START if scheme == DAMP_FIRE else 1.0
     a_mix = alpha
     n_pos = 0
+    n_over = info[I_OVER]
     place_rigid_nodes(dyn)
     for it in range(1, max_iter + 1):
         eint = internal_forces(mesh, cont, dyn)
@@ -257,6 +273,20 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, tol, ref_floor
             if c_visc > 1.9:
                 c_visc = 1.9
             fprev[:] = dyn.fint
+            if it > 1 and num > UNSTABLE_RQ * den > 0.0:
+                n_over += 1.0
+            if it % UNSTABLE_WINDOW == 0:
+                n_over *= 0.5
+            if n_over >= UNSTABLE_COUNT:
+                status = ST_UNSTABLE
+                qty = num / den
+                vmax = -1.0
+                for i in range(n):
+                    for k in range(3):
+                        if dyn.free[i, k] > 0.0 and abs(dyn.V[i, k]) > vmax:
+                            vmax = abs(dyn.V[i, k])
+                            worst = i
+                break
         # FIRE: v <- keep v + (c_mix + dt) M^-1 r (mixing, then the semi-implicit Euler step)
         keep = 1.0
         c_mix = 0.0
@@ -392,3 +422,4 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, tol, ref_floor
     info[I_QTY] = qty
     info[I_REF] = ref
     info[I_EINT] = eint
+    info[I_OVER] = n_over
