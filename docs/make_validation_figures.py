@@ -4,8 +4,10 @@ Usage: ``python docs/make_validation_figures.py RESULT.h5 [RESULT.h5 ...]``: for
 scene is read from the file's stored configuration; writes into docs/ the response curve, the
 crack map (joint damage and block tensile damage) at the frame nearest the peak and at the last
 frame, the crushing map (block compressive damage) at the last frame and, for the house, the
-vertical reactions of each wall and pier (paper Fig. 26). Commands that made the result files are
-listed in docs/validation.md.
+vertical reactions of each wall and pier (paper Fig. 26).
+``python docs/make_validation_figures.py overlay NAME RESULT.h5=LABEL ...`` draws the response
+curves of runs of one scene on one plot, ``docs/NAME.png``. Commands that made the result files
+are listed in docs/validation.md.
 """
 import os
 import sys
@@ -69,7 +71,18 @@ def figures(path):
     return made
 
 
+def overlay(name, specs):
+    """Response curves of the runs ``specs`` (``path=label``) on one plot ``docs/name.png``."""
+    paths, labels = zip(*(spec.split("=", 1) for spec in specs))
+    xk, yk, ys, _ = SCENES[scene_of(open_result(paths[0]))]
+    return plot_history(list(paths), xk, yk, os.path.join(HERE, name + ".png"), yscale=ys,
+                        label=list(labels))
+
+
 if __name__ == "__main__":
-    for p in sys.argv[1:]:
-        for f in figures(p):
-            print(f)
+    if sys.argv[1:2] == ["overlay"]:
+        print(overlay(sys.argv[2], sys.argv[3:]))
+    else:
+        for p in sys.argv[1:]:
+            for f in figures(p):
+                print(f)
