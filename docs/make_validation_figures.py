@@ -73,10 +73,13 @@ def figures(path):
 
 def overlay(name, specs):
     """Response curves of the runs ``specs`` (``path=label``) on one plot ``docs/name.png``."""
+    from dr_masonry.cli import import_case
     paths, labels = zip(*(spec.split("=", 1) for spec in specs))
-    xk, yk, ys, _ = SCENES[scene_of(open_result(paths[0]))]
+    scene = scene_of(open_result(paths[0]))
+    xk, yk, ys, _ = SCENES[scene]
+    curve = import_case(scene).CURVE
     return plot_history(list(paths), xk, yk, os.path.join(HERE, name + ".png"), yscale=ys,
-                        label=list(labels))
+                        label=list(labels), xlabel=curve["xlabel"], ylabel=curve["ylabel"])
 
 
 if __name__ == "__main__":
