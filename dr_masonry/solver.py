@@ -450,8 +450,8 @@ class Simulation:
         """(stage index, increments of it done, its controls' start values) of the checkpoint.
 
         Checkpoints store their position; for older files it is found from the number of
-        increments, checked against the prescribed paths (a run whose increments were cut, or
-        stopped inside a ramp, cannot be located that way and is refused).
+        increments, checked against the prescribed paths (a run whose increments were cut cannot
+        be located that way and is refused); a ramp's start follows from its value there.
         """
         pos = self._checkpoint_stage
         if pos is not None:
@@ -471,13 +471,13 @@ class Simulation:
             raise L.LoadingError(f"resume {self.output}: the checkpoint is after {self.increment} "
                                  f"increments, the stages given have fewer (not the same run)")
         starts = {}
+        n = stage.increments
         for ctl in stage.controls:
             key = self._key(ctl)
             now = self.values.get(key, 0.0)
-            if ctl.path is None and ctl.to is not None and done < stage.increments:
-                raise L.LoadingError(f"resume {self.output}: the file has no stage position and "
-                                     f"stopped inside the ramp of control {ctl.label}")
-            starts[key] = now
+            # a ramp's value after `done` of n increments fixes its start value
+            starts[key] = (n * now - done * ctl.to) / (n - done) if (
+                ctl.path is None and ctl.to is not None and 0 < done < n) else now
             if ctl.path is not None and done and not np.isclose(ctl.path[done - 1], now, rtol=1e-9,
                                                                 atol=1e-15):
                 raise L.LoadingError(f"resume {self.output}: control {ctl.label} is at {now:.6g}, "

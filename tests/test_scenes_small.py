@@ -4,6 +4,7 @@ import pytest
 
 from dr_masonry import JointLaw, PlasticDamage, SolverOptions
 from dr_masonry.cases import couplet, triplet, wallet
+from dr_masonry.loading import LoadingError
 from dr_masonry.solver import SolverError
 
 
@@ -125,3 +126,39 @@ def test_energy_warning_when_balance_fails(monkeypatch):
     sim.options.energy_tol = 1e-9
     with pytest.warns(RuntimeWarning, match="energy balance error"):
         sim.run(stages)
+
+
+def test_resume_file_without_stage_position(tmp_path):
+    """A checkpoint written before stage positions were stored is located by its increment count
+    when the prescribed path confirms it, and refused when the path does not match."""
+    import json
+    import shutil
+
+    import h5py
+    params = dict(couplet.PARAMS, increments=20)
+    path = str(tmp_path / "old.h5")
+    sim, (stage,) = couplet.build(dict(params, h5=path))
+    pull = stage.controls[-1]
+    first = type(stage)("pull", 8, stage.controls[:-1] + [type(pull)(
+        target=pull.target, dof="z", path=pull.path[:8], name="pull")], frames=4)
+    sim.run([first])
+    sim.close()
+    with h5py.File(path, "r+") as f:     # as an older version wrote it
+        meta = json.loads(f["checkpoint"].attrs["meta"])
+        del meta["stage"]
+        f["checkpoint"].attrs["meta"] = json.dumps(meta)
+    copy = str(tmp_path / "old_copy.h5")
+    shutil.copy(path, copy)
+    whole_sim, (whole,) = couplet.build(dict(params, h5=None))
+    ref = whole_sim.run([whole])
+    sim2, (stage2,) = couplet.build(dict(params, h5=None))
+    sim2.resume(path)
+    hist = sim2.run([stage2])                # located at increment 8 of the 20 of the path
+    sim2.close()
+    assert np.allclose(hist["platen.fz"], ref["platen.fz"], rtol=1e-6, atol=1e-6)
+    sim3, (stage3,) = couplet.build(dict(params, h5=None))
+    sim3.resume(copy)
+    shifted = type(stage3)("pull", 20, stage3.controls[:-1] + [type(pull)(
+        target=sim3.rigid_points[0], dof="z", path=pull.path * 1.5, name="pull")])
+    with pytest.raises(LoadingError, match="not at the value of increment 8"):
+        sim3.run([shifted])
