@@ -595,3 +595,34 @@ def _face_of_quads(model, blocks, quads):
         level = 0 if side < 0 else div[:, axis]
         f[(f < 0) & np.all(ijk[:, :, axis] == np.reshape(level, (-1, 1)), axis=1)] = face
     return f
+
+
+# ---------------------------------------------------------------------------- sliding off a face
+def master_sides(model, contacts):
+    """Corner node ids (nc, 4) of the master block face that holds each contact's master quad,
+    in the face's grid order (a convex polygon, counter-clockwise about its normal)."""
+    if contacts.n == 0:
+        return np.zeros((0, 4), np.int64)
+    mb = contacts.blocks[:, 1]
+    face = _face_of_quads(model, mb, contacts.master)
+    return _faces(model, model.nodes)["nodes"][6 * mb + face]
+
+
+def overhang(x, slave, sides):
+    """How far (nc,) m each slave node lies outside its master block face, in the face's plane.
+
+    ``x`` (n_nodes, 3) m current coordinates, ``slave`` (nc,) node ids, ``sides`` (nc, 4) from
+    :func:`master_sides`. 0 for a node over the face; otherwise the distance beyond the nearest
+    violated edge line. The contact points are paired in the reference configuration (small
+    sliding): a node that slid off its master block's face still pushes on it.
+    """
+    q = x[sides]                                                   # (nc, 4, 3)
+    n = np.cross(q[:, 2] - q[:, 0], q[:, 3] - q[:, 1])
+    n /= np.linalg.norm(n, axis=1)[:, None]
+    p = x[slave]
+    inside = np.full(slave.shape[0], np.inf)
+    for e in range(4):
+        edge = q[:, (e + 1) % 4] - q[:, e]
+        sd = np.einsum("ij,ij->i", np.cross(edge, p - q[:, e]), n) / np.linalg.norm(edge, axis=1)
+        inside = np.minimum(inside, sd)
+    return np.maximum(0.0, -inside) + 0.0   # + 0.0: no -0.0

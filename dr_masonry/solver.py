@@ -37,6 +37,9 @@ DAMPING = {"kinetic": R.DAMP_KINETIC, "viscous": R.DAMP_VISCOUS, "local": R.DAMP
 
 #: "auto" coarse correction from this many movable blocks on (walls; not couplets and triplets)
 COARSE_MIN_BLOCKS = 30
+#: warn (once per run) when a joint node has slid off its master block's face by more than this
+#: fraction of the face's shortest edge: contact points are paired in the reference configuration
+OVERHANG_WARN = 0.05
 
 
 class SolverError(RuntimeError):
@@ -251,6 +254,11 @@ class Simulation:
             js0 = np.zeros((0, NJS))
         cptr, crows = node_row_map(np.column_stack([c.slave, c.master]), n)
         nc = c.n
+        from .contact_search import master_sides, overhang
+        self._sides = master_sides(m, c)
+        self._overhang0 = overhang(m.nodes, c.slave, self._sides)  # partial overlaps at the start
+        q = m.nodes[self._sides]
+        self._side_size = np.linalg.norm(q[:, [1, 2, 3, 0]] - q, axis=2).min(axis=1)
         self.cont = Cont(c.slave, c.master, c.xi, c.area, c.law, lparams, c.gap0,
                          np.ascontiguousarray(js0), js0.copy(), np.zeros((nc, 3)), np.zeros((nc, 3)),
                          np.zeros((nc * 5, 3)), np.zeros(nc), cptr, crows)
@@ -717,7 +725,8 @@ class Simulation:
                "balance_error": err / self.energy["W_gross"] if self.energy["W_gross"] > 0 else 0.0,
                "max_joint_damage": float(cont.s_old[:, JS_D].max()) if cont.slave.size else 0.0,
                "max_dt": float(mesh.s_old[:, :, MS_DT].max()) if wd.size else 0.0,
-               "max_dc": float(mesh.s_old[:, :, MS_DC].max()) if wd.size else 0.0}
+               "max_dc": float(mesh.s_old[:, :, MS_DC].max()) if wd.size else 0.0,
+               "max_overhang": self._check_overhang()}
         for rp in self.rigid_points:
             for name, k in L.DOFS.items():
                 row[f"{rp.name}.u{name}"] = d.rpU[rp.index, k]
@@ -738,6 +747,29 @@ class Simulation:
         self.last_row = row
         if self.writer is not None:
             self.writer.append_history(row)
+
+    def _check_overhang(self):
+        """Largest distance (m) by which a joint node has slid off its master block's face (the
+        start's partial overlaps subtracted); warns once per run beyond ``OVERHANG_WARN``."""
+        from .contact_search import overhang
+        cont = self.cont
+        if cont.slave.size == 0:
+            return 0.0
+        ov = np.maximum(overhang(self.dyn.X + self.dyn.U, cont.slave, self._sides)
+                        - self._overhang0, 0.0)
+        k = int(np.argmax(ov / self._side_size))
+        if ov[k] > OVERHANG_WARN * self._side_size[k] and "overhang" not in self._warned:
+            import warnings
+            self._warned.add("overhang")
+            node = int(cont.slave[k])
+            warnings.warn(f"increment {self.increment}: joint node {node} (block "
+                          f"{self.model.node_block[node]}) has slid {ov[k] * 1e3:.3g} mm off the face "
+                          f"of block {self.model.node_block[cont.master[k, 0]]} "
+                          f"({ov[k] / self._side_size[k]:.0%} of its shortest edge): contact "
+                          f"points are paired in the reference configuration, so such a node "
+                          f"still pushes on that face; joint forces near the block ends are "
+                          f"approximate from here on", RuntimeWarning)
+        return float(ov.max())
 
     def _audit(self, row):
         """Say once per run when the energy balance leaves its bound.

@@ -214,6 +214,35 @@ def test_sliding_dry_joint():
     np.testing.assert_allclose(lam[plateau], mu, rtol=0.02)
     assert abs(hist["top.ury"]).max() < 1e-3 * u.max() / h  # it slides, it does not rock
     assert np.all(np.abs(bal) < 0.01)
+    # the foundation is longer: no node leaves it (nm from the lateral Poisson strain at the
+    # edges of the equally thick faces)
+    assert hist["max_overhang"].max() < 1e-3 * u.max()
+
+
+def test_sliding_off_the_master_face_is_reported():
+    """A block sliding on a support of its own length: the overhang of the leading nodes equals
+    the slip (contact points stay paired with the support's end face), and the run warns once
+    when it passes 5 % of the face's shortest edge."""
+    from dr_masonry.contact_search import master_sides, overhang
+    m = Model()
+    m.set_joint_law(JointLaw.dry(0.3))
+    mat = PlasticDamage.elastic(10e9, 0.2, 2000.0)
+    m.add_box((0.0, 0.0, -0.1), (0.2, 0.1, 0.1), mat, (2, 1, 1), fixed=True)
+    blk = m.add_box((0.0, 0.0, 0.0), (0.2, 0.1, 0.1), mat, (4, 1, 1))
+    sim = Simulation(m, SolverOptions(tol=1e-6))
+    nodes = m.block_nodes(blk)
+    rp = sim.rigid_point("top", nodes=nodes[np.isclose(m.nodes[nodes, 2], 0.1)])
+    push = Indirect(pattern=BodyForce(accel=(9.81, 0.0, 0.0), blocks=[blk]), target=rp, dof="x",
+                    path=np.linspace(0.002, 0.012, 6))
+    with pytest.warns(RuntimeWarning, match=r"slid .* mm off the face of block 0 \(\d+% of its "
+                                            r"shortest edge\)"):
+        hist = sim.run([Stage("gravity", 1, [Load(pattern=Gravity(), to=1.0)]),
+                        Stage("push", 6, [push])])
+    slip = hist["top.ux"][1:]
+    np.testing.assert_allclose(hist["max_overhang"][1:], slip, rtol=0.02)
+    c = m.contacts
+    x = m.nodes + sim.dyn.U
+    assert overhang(x, c.slave, master_sides(m, c)).max() == pytest.approx(slip[-1], rel=0.02)
 
 
 def test_pressure_on_a_face_is_carried_to_the_support():
