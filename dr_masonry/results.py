@@ -98,6 +98,7 @@ class ResultWriter:
 
     def __init__(self, path, model, config, mode="w"):
         self.path = os.fspath(path)
+        self._restart = mode == "a"
         if mode == "w":
             if model is None:
                 raise ResultsError("ResultWriter: mode 'w' needs a model, got None")
@@ -152,7 +153,8 @@ class ResultWriter:
 
     # ------------------------------------------------------------------ writing
     def append_history(self, row):
-        """Append one row ``{key: float}`` to ``/history`` (keys fixed by the first row)."""
+        """Append one row ``{key: float}`` to ``/history`` (keys fixed by the first row; a
+        restart (mode ``"a"``) may add columns, NaN in the rows before it)."""
         h = self._f["history"]
         cols = _columns(h)
         if not cols:
@@ -168,8 +170,15 @@ class ResultWriter:
         elif set(row) != set(cols):
             missing = sorted(set(cols) - set(row))
             extra = sorted(set(row) - set(cols))
-            raise ResultsError(f"append_history: row keys differ from the file's columns "
-                               f"(missing {missing}, unknown {extra}); columns are {cols}")
+            if missing or not self._restart:
+                raise ResultsError(f"append_history: row keys differ from the file's columns "
+                                   f"(missing {missing}, unknown {extra}); columns are {cols}")
+            # a restart by a newer version may add columns: NaN in the rows written before
+            n = h[cols[0]].shape[0]
+            for k in extra:
+                h.create_dataset(k, data=np.full(n, np.nan), maxshape=(None,), chunks=(1024,))
+            cols = cols + extra
+            h.attrs["columns"] = _json(cols)
         values = {}
         for k in cols:
             try:

@@ -200,8 +200,17 @@ def test_append_restart(tmp_path):
         assert w.frame_ids == [0, 2] and w.n_history == 3
         w.append_history({"increment": 3, "disp": 7.0, "force": 8.0})
         w.write_frame(3, fake_fields(m, 3))
+        # a newer version may add a column at a restart (NaN before), never drop one
+        w.append_history({"increment": 4, "disp": 8.0, "force": 9.0, "new": 1.5})
+        with pytest.raises(ResultsError, match=r"missing \['force'\]"):
+            w.append_history({"increment": 5, "disp": 9.0, "new": 2.0})
     r = open_result(p)
-    np.testing.assert_array_equal(r.history["disp"], [0.0, 1e-4, 2e-4, 7.0])
+    np.testing.assert_array_equal(r.history["disp"], [0.0, 1e-4, 2e-4, 7.0, 8.0])
+    np.testing.assert_array_equal(r.history["new"], [np.nan] * 4 + [1.5])
+    with ResultWriter(tmp_path / "fresh.h5", m, {}) as w:   # a new file's columns are fixed
+        w.append_history({"a": 1.0})
+        with pytest.raises(ResultsError, match=r"unknown \['b'\]"):
+            w.append_history({"a": 2.0, "b": 1.0})
     assert r.frame_ids == [0, 2, 3]
     assert r.attrs["restarts"][0]["config"] == {"restart": True}
     other = Model()
