@@ -70,6 +70,9 @@ class SolverOptions:
         or "auto" (default: on for models of at least ``COARSE_MIN_BLOCKS`` movable blocks, where
         it saves 2-6 x the iterations before the peak; on a few blocks it only adds work,
         BENCHMARKS.md)
+    checkpoint_s : between frames, write the restart data again once this many seconds of wall
+        time have passed since the last time (0: after every increment), so that an interrupted
+        long run loses at most about this much work
     progress : show a progress bar
     """
     damping: str = "viscous"
@@ -83,6 +86,7 @@ class SolverOptions:
     predictor: bool = True
     coarse: object = "auto"
     coarse_every: int = 200
+    checkpoint_s: float = 60.0
     progress: bool = False
 
     def __post_init__(self):
@@ -99,6 +103,8 @@ class SolverOptions:
         if self.coarse not in (True, False, "auto"):
             raise ValueError(f"SolverOptions.coarse must be True, False or 'auto', got "
                              f"{self.coarse!r}")
+        if not (np.isfinite(self.checkpoint_s) and self.checkpoint_s >= 0):
+            raise ValueError(f"SolverOptions.checkpoint_s must be >= 0 s, got {self.checkpoint_s}")
         if self.max_iter < 1 or self.check_every < 1 or self.max_cuts < 0 or self.coarse_every < 1:
             raise ValueError("SolverOptions: max_iter, check_every and coarse_every must be >= 1, "
                              "max_cuts >= 0")
@@ -138,6 +144,7 @@ class Simulation:
         self.coarse = None
         self._resuming = False
         self._checkpoint_stage = None
+        self._checkpoint_time = time.perf_counter()
         self.stage_position = None
         self._warned = set()
         self.history = {}
@@ -526,6 +533,9 @@ class Simulation:
             self.stage_position = (k, i + 1, start_values, n_stages, n)
             if (i + 1) % stage.frames == 0 or i == n - 1:
                 self._write_frame()
+            elif (self.writer is not None and
+                  time.perf_counter() - self._checkpoint_time >= self.options.checkpoint_s):
+                self._write_checkpoint()
             if bar is not None:
                 bar.update(1)
                 bar.set_postfix_str(f"{stage.name} res={self.last_residual:.1e} "
@@ -807,7 +817,9 @@ class Simulation:
     _STATE = ("U", "V", "free", "rpU", "rpV", "rpfree")
 
     def _write_checkpoint(self):
-        """Store everything a continued run needs (overwritten at every frame)."""
+        """Store everything a continued run needs (overwritten at every frame and every
+        ``options.checkpoint_s`` between frames)."""
+        self._checkpoint_time = time.perf_counter()
         d = self.dyn
         arrays = {k: getattr(d, k) for k in self._STATE}
         arrays.update(rp_force=self.rp_force, lam=self.lam, f_prev=self.f_prev,

@@ -207,6 +207,7 @@ def test_interrupted_run_resumes(tmp_path, monkeypatch, squat):
         squat_wall.run(params)
     monkeypatch.setattr(Simulation, "_commit", commit)
     assert open_result(params["h5"]).n_history == 9
+    assert open_result(params["h5"]).checkpoint()[0] == 8   # frames=1: the last whole increment
     with pytest.raises(ParameterError, match="sigma="):
         squat_wall.run(dict(params, resume=True, sigma=0.2e6))
     sim, hist, push = squat_wall.run(dict(params, resume=True))
@@ -214,3 +215,30 @@ def test_interrupted_run_resumes(tmp_path, monkeypatch, squat):
     assert np.array_equal(hist["increment"], whole["increment"])
     assert np.allclose(hist["beam.fx"], whole["beam.fx"], rtol=1e-3, atol=1.0)
     assert open_result(params["h5"]).n_history == whole["increment"].size
+
+
+def test_checkpoint_between_frames(tmp_path, monkeypatch):
+    """With checkpoint_s = 0 the restart data follow every increment even when frames are
+    sparse: an interrupted run loses no row."""
+    from dr_masonry.results import open_result
+    from dr_masonry.solver import Simulation, SolverOptions
+    init = SolverOptions.__init__
+
+    def every_increment(self, *a, **k):
+        init(self, *a, **k)
+        self.checkpoint_s = 0.0
+    monkeypatch.setattr(SolverOptions, "__init__", every_increment)
+    commit = Simulation._commit
+
+    def stop_after_7(self, *args):
+        commit(self, *args)
+        if self.increment == 7:
+            raise KeyboardInterrupt
+    monkeypatch.setattr(Simulation, "_commit", stop_after_7)
+    params = dict(tiny(squat_wall), h5=str(tmp_path / "s5.h5"), frames=100, increments=6)
+    with pytest.raises(KeyboardInterrupt):
+        squat_wall.run(params)
+    r = open_result(params["h5"])
+    assert r.frame_ids == [2] and r.checkpoint()[0] == 6   # the increment before the interrupt
+    with pytest.raises(ValueError, match="checkpoint_s"):
+        SolverOptions(checkpoint_s=-1.0)
