@@ -189,6 +189,18 @@ def test_main_writes_outputs(tmp_path):
     assert math.isfinite(np.loadtxt(str(out) + ".csv", delimiter=",", skiprows=1)[-1, 0])
 
 
+def interrupt_after(monkeypatch, increment):
+    """Make runs raise KeyboardInterrupt once ``increment`` has been committed (an interrupt)."""
+    from dr_masonry.solver import Simulation
+    commit = Simulation._commit
+
+    def stop(self, *args):
+        commit(self, *args)
+        if self.increment == increment:
+            raise KeyboardInterrupt
+    monkeypatch.setattr(Simulation, "_commit", stop)
+
+
 def test_interrupted_run_resumes(tmp_path, monkeypatch, squat):
     """A run interrupted inside its push stage and continued with ``resume=true`` ends where the
     uninterrupted run ends, with every row once; changed parameters are refused."""
@@ -197,12 +209,7 @@ def test_interrupted_run_resumes(tmp_path, monkeypatch, squat):
     _, whole, _ = squat
     params = dict(tiny(squat_wall), h5=str(tmp_path / "s5.h5"), frames=1)
     commit = Simulation._commit
-
-    def stop_after_9(self, *args):
-        commit(self, *args)
-        if self.increment == 9:
-            raise KeyboardInterrupt
-    monkeypatch.setattr(Simulation, "_commit", stop_after_9)
+    interrupt_after(monkeypatch, 9)
     with pytest.raises(KeyboardInterrupt):
         squat_wall.run(params)
     monkeypatch.setattr(Simulation, "_commit", commit)
@@ -221,20 +228,14 @@ def test_checkpoint_between_frames(tmp_path, monkeypatch):
     """With checkpoint_s = 0 the restart data follow every increment even when frames are
     sparse: an interrupted run loses no row."""
     from dr_masonry.results import open_result
-    from dr_masonry.solver import Simulation, SolverOptions
+    from dr_masonry.solver import SolverOptions
     init = SolverOptions.__init__
 
     def every_increment(self, *a, **k):
         init(self, *a, **k)
         self.checkpoint_s = 0.0
     monkeypatch.setattr(SolverOptions, "__init__", every_increment)
-    commit = Simulation._commit
-
-    def stop_after_7(self, *args):
-        commit(self, *args)
-        if self.increment == 7:
-            raise KeyboardInterrupt
-    monkeypatch.setattr(Simulation, "_commit", stop_after_7)
+    interrupt_after(monkeypatch, 7)
     params = dict(tiny(squat_wall), h5=str(tmp_path / "s5.h5"), frames=100, increments=6)
     with pytest.raises(KeyboardInterrupt):
         squat_wall.run(params)
