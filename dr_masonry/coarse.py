@@ -16,10 +16,11 @@ current state: the blocks' elastic strain energy of affine motions (exact for tr
 hexahedra; softened by the block's mean damage) and the joints' secant stiffnesses at each
 contact point (slave node against master point). Dynamic relaxation then only has to remove what
 the affine blocks cannot represent, local and fast: a two-level method with relaxation as the
-smoother. The operator is factorised once per increment (sparse LU). A step is accepted only if it lowers the total potential energy of the trial state
-(halved twice before giving up; the out-of-balance norm is no guide, as a coarse motion leaves
-element-scale residuals); it changes trial states only, never the committed history, so it
-cannot damage anything the relaxation would not.
+smoother. The operator is factorised once per increment (sparse LU). A step is accepted only if
+it lowers the total potential energy of the trial state (halved twice before giving up; the
+out-of-balance norm is no guide, as a coarse motion leaves element-scale residuals); it changes
+trial states only, never the committed history, so it cannot damage anything the relaxation
+would not.
 
 Fixed blocks and blocks tied to reference points are not coarse unknowns (the latter move with
 their reference point, whose free DOFs are); held node DOFs of the other blocks (supports,

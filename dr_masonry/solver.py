@@ -145,6 +145,8 @@ class Simulation:
         self._resuming = False
         self._checkpoint_stage = None
         self._checkpoint_time = time.perf_counter()
+        # after each increment: (stage, its increments done, the controls' start values as
+        # [[key, value]], stages of the run call, increments of the stage); stored in checkpoints
         self.stage_position = None
         self._warned = set()
         self.history = {}
@@ -452,8 +454,8 @@ class Simulation:
         bar = tqdm(total=total, disable=not self.options.progress, unit="incr") if tqdm else None
         try:
             for k, stage in enumerate(stages[k0:], start=k0):
-                self.stage_position = (k, 0, None, len(stages), stage.increments)
-                self._run_stage(stage, bar, *((i0, starts) if k == k0 else (0, None)))
+                self._run_stage(stage, bar, (k, len(stages)),
+                                *((i0, starts) if k == k0 else (0, None)))
         finally:
             if bar is not None:
                 bar.close()
@@ -507,30 +509,30 @@ class Simulation:
             self.writer.close()
             self.writer = None
 
-    def _run_stage(self, stage, bar, first=0, starts=None):
-        """Run the increments ``first`` ... of ``stage``; ``starts``: the controls' values at the
-        stage's start when it is continued from a checkpoint."""
+    def _run_stage(self, stage, bar, where, first=0, starts=None):
+        """Run the increments ``first`` ... of ``stage``, number ``where[0]`` of the ``where[1]``
+        stages of this ``run``; ``starts``: the controls' values at the stage's start when it is
+        continued from a checkpoint (default: their current values)."""
         n = stage.increments
         targets = {}
         indirect = None
+        starts = dict(starts) if starts is not None else {}
         for ctl in stage.controls:
             key = self._key(ctl)
-            start = starts[key] if starts is not None else self.values.get(key, 0.0)
+            start = starts.setdefault(key, self.values.get(key, 0.0))
             targets[key] = (ctl, ctl.values(start, n))
             if isinstance(ctl, L.Indirect):
                 indirect = ctl
                 if first == 0 and self.factors.get(ctl.pattern.name) is not None:
                     self.lam[0] = self.factors[ctl.pattern.name]
                 self._pattern(ctl.pattern)
-        k, n_stages = self.stage_position[0], self.stage_position[3]
-        start_values = [[list(key), float(starts[key] if starts is not None else
-                                          self.values.get(key, 0.0))] for key in targets]
+        start_values = [[list(key), float(starts[key])] for key in targets]
         self.stage_name = stage.name
         self.stage_indirect = indirect
         for i in range(first, n):
             goal = {key: vals[i] for key, (ctl, vals) in targets.items()}
             self._increment(stage, targets, goal, indirect, depth=0)
-            self.stage_position = (k, i + 1, start_values, n_stages, n)
+            self.stage_position = (where[0], i + 1, start_values, where[1], n)
             if (i + 1) % stage.frames == 0 or i == n - 1:
                 self._write_frame()
             elif (self.writer is not None and
