@@ -11,6 +11,19 @@ if ROOT not in sys.path:  # ``cases`` is imported from the repository root
     sys.path.insert(0, ROOT)
 
 
+def divisions(text, what):
+    """``"4x2x1"`` -> (4, 2, 1): three integers >= 1 (hexahedra along x, y, z); a ParameterError
+    naming the parameter ``what`` and the value otherwise."""
+    from dr_masonry.params import ParameterError
+    try:
+        out = tuple(int(v) for v in text.lower().split("x"))
+    except ValueError:
+        out = ()
+    if len(out) != 3 or min(out) < 1:
+        raise ParameterError(f"{what} {text!r}: expected three integers >= 1 like 4x2x1")
+    return out
+
+
 def machine():
     """One line describing the machine and its load at the time of the run."""
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")

@@ -49,7 +49,7 @@ import warnings
 
 import numpy as np
 
-from common import OUT, ROOT, machine, report  # noqa: I100  (script folder on sys.path)
+from common import OUT, ROOT, divisions, machine, report  # noqa: I100  (script folder on sys.path)
 
 PARAMS = dict(
     problem="linear,s2",
@@ -85,18 +85,6 @@ TESTS = os.path.join(ROOT, "tests")  # linear_reference.py: the independent dire
 
 
 # ------------------------------------------------------------------ shared helpers
-def div(mesh):
-    """``"4x2x1"`` -> (4, 2, 1): hexahedra per brick along, through the thickness, over the height."""
-    from dr_masonry.params import ParameterError
-    try:
-        out = tuple(int(v) for v in mesh.lower().split("x"))
-    except ValueError:
-        out = ()
-    if len(out) != 3 or min(out) < 1:
-        raise ParameterError(f"mesh {mesh!r}: expected three positive integers like 4x2x1")
-    return out
-
-
 def floats(text):
     """``"1e-2,1e-3"`` -> [0.01, 0.001]."""
     return [float(v) for v in text.split(",")]
@@ -173,7 +161,8 @@ def column(params, mesh, tol):
     mat = PlasticDamage.elastic(4.8e9, 0.17, 1800.0)
     n = params["col_blocks"]
     for k in range(n):
-        model.add_box((0.0, 0.0, k * b.height), (b.length, b.thickness, b.height), mat, div(mesh))
+        model.add_box((0.0, 0.0, k * b.height), (b.length, b.thickness, b.height), mat,
+                      divisions(mesh, "mesh"))
     sim = Simulation(model, SolverOptions(tol=tol))
     z = model.nodes[:, 2]
     base = np.nonzero(np.isclose(z, 0.0))[0]
@@ -220,7 +209,7 @@ def scene(problem, params, mesh, tol):
     """(simulation, stages, x key, y key, y scale) of an S2 or S5 run; h5 output off."""
     if problem == "s2":
         from dr_masonry.cases import triplet
-        nx, ny, nz = div(mesh)
+        nx, ny, nz = divisions(mesh, "mesh")
         p = dict(triplet.PARAMS, nx=nx, ny=ny, nz=nz, tol=tol, increments=params["s2_increments"],
                  h5=None)
         sim, stages = triplet.build(p, params["sigma"] * 1e6)

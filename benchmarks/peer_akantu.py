@@ -51,7 +51,7 @@ import time
 
 import numpy as np
 
-from common import OUT, machine, report  # noqa: I100  (script folder on sys.path)
+from common import OUT, divisions, machine, report  # noqa: I100  (script folder on sys.path)
 from benchmarks import kernels as bench  # noqa: I100  (common puts the repository root on sys.path)
 
 PARAMS = dict(
@@ -71,17 +71,6 @@ PARAMS = dict(
 )
 VARIANTS = {"small": False, "finite": True}
 M_TRIM_THRESHOLD, M_TOP_PAD, M_MMAP_MAX = -1, -2, -4  # glibc mallopt parameters
-
-
-def parse_size(text):
-    """``"nx x ny x nz"`` -> (nx, ny, nz) ints >= 1."""
-    try:
-        div = tuple(int(v) for v in text.lower().split("x"))
-    except ValueError:
-        div = ()
-    if len(div) != 3 or min(div) < 1:
-        raise ValueError(f"sizes: {text!r} is not nx x ny x nz with three integers >= 1")
-    return div
 
 
 def write_gmsh(path, X, conn):
@@ -287,7 +276,7 @@ def main(argv=None):
     except ImportError as err:
         raise SystemExit(f"peer_akantu.py needs the optional package akantu (pip install akantu), "
                          f"which dr_masonry itself never uses: {err}")
-    sizes = [parse_size(s) for s in params["sizes"]]
+    sizes = [divisions(s, "sizes") for s in params["sizes"]]
     for variant in params["akantu"]:
         if variant not in VARIANTS:
             raise ValueError(f"akantu: {variant!r} is not one of {list(VARIANTS)}")
