@@ -101,7 +101,7 @@ def gravity(sim):
     d.fext[:] = 0.0
     d.fext[:, 2] = -9.81 * sim.mass * d.free[:, 2]
     return [sim.mesh, sim.cont, d, np.zeros(1), np.zeros(3, dtype=np.int64), 1.0, R.DAMP_VISCOUS,
-            1.0, 0.0, sim.ref_floor, 1, 10, 0.5 * sim.size, np.zeros(R.N_INFO)]
+            1.0, 0.0, sim.ref_floor, 1, 10, 0, 0.5 * sim.size, np.zeros(R.N_INFO)]
 
 
 def timed(fn, args, repeats, min_time):

@@ -133,7 +133,7 @@ def relax_args(sim, iters):
     """Arguments of ``relax``: undamped (viscous, alpha 0), no load, no control, tol 0."""
     from dr_masonry.kernels import relaxation as R
     return [sim.mesh, sim.cont, sim.dyn, np.zeros(1), np.zeros(3, dtype=np.int64), 1.0,
-            R.DAMP_VISCOUS, 0.0, 0.0, sim.ref_floor, iters, 10, 0.5 * sim.size,
+            R.DAMP_VISCOUS, 0.0, 0.0, sim.ref_floor, iters, 10, 0, 0.5 * sim.size,
             np.zeros(R.N_INFO)]
 
 

@@ -44,12 +44,17 @@ def run_stages(sim, stages, params):
 
 
 def solver_summary(hist, rows):
-    """Damage maxima at the end, iterations per increment over ``rows`` (bool mask) and the
-    relaxation time of a run's history, as one phrase."""
+    """Damage maxima at the end, iterations per increment over ``rows`` (bool mask), the
+    relaxation time of a run's history and the work lost in attempts that were cut, as one
+    phrase."""
+    cut_it = np.nansum(hist.get("cut_iterations", np.zeros(1)))
+    cut_s = np.nansum(hist.get("cut_s", np.zeros(1)))
+    cuts = (f" (+ {cut_it:.0f} iterations, {cut_s:.1f} s in attempts cut in two)"
+            if cut_it else "")
     return (f"max joint damage {hist['max_joint_damage'][-1]:.2f}, block dt "
             f"{hist['max_dt'][-1]:.2f}, dc {hist['max_dc'][-1]:.2f}; iterations per increment "
             f"{np.mean(hist['iterations'][rows]):.0f} (max {np.max(hist['iterations'][rows]):.0f});"
-            f" relaxation time {np.sum(hist['time_s']):.1f} s")
+            f" relaxation time {np.sum(hist['time_s']):.1f} s{cuts}")
 
 
 def finish(sim, out, x, y, xlabel, ylabel, title, reference=None, vtk=True):

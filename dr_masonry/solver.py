@@ -59,6 +59,11 @@ class SolverOptions:
     safety : fictitious masses = safety * Gershgorin row sum / 4 (stable for safety >= 1)
     max_iter : iteration cap of one increment before it is cut in two
     max_cuts : how many times an increment may be halved before the run stops
+    stall_iter : an increment whose residual ratio has not halved from its best value for this
+        many iterations is cut in two before ``max_iter`` (0: never). At a mechanism's onset the
+        relaxation can hover just above ``tol`` for the whole cap while the two halves converge
+        in a few thousand iterations each (BENCHMARKS.md, section 10); at the last allowed cut
+        the increment runs to ``max_iter``
     check_every : iterations between convergence checks
     energy_tol : energy-balance error above which a warning is recorded; the error is
         W_ext - E_stored - D_blocks - D_joints relative to the gross external work
@@ -81,6 +86,7 @@ class SolverOptions:
     safety: float = 1.1
     max_iter: int = 200_000
     max_cuts: int = 4
+    stall_iter: int = 10_000
     check_every: int = 10
     energy_tol: float = 0.01
     predictor: bool = True
@@ -105,9 +111,12 @@ class SolverOptions:
                              f"{self.coarse!r}")
         if not (np.isfinite(self.checkpoint_s) and self.checkpoint_s >= 0):
             raise ValueError(f"SolverOptions.checkpoint_s must be >= 0 s, got {self.checkpoint_s}")
-        if self.max_iter < 1 or self.check_every < 1 or self.max_cuts < 0 or self.coarse_every < 1:
+        if (self.max_iter < 1 or self.check_every < 1 or self.max_cuts < 0
+                or self.coarse_every < 1 or self.stall_iter < 0):
             raise ValueError("SolverOptions: max_iter, check_every and coarse_every must be >= 1, "
-                             "max_cuts >= 0")
+                             f"max_cuts and stall_iter >= 0 (got {self.max_iter}, "
+                             f"{self.check_every}, {self.coarse_every}, {self.max_cuts}, "
+                             f"{self.stall_iter})")
 
 
 class Simulation:
@@ -151,6 +160,8 @@ class Simulation:
         self._warned = set()
         self.history = {}
         self.increment = 0
+        # iterations and relaxation seconds of attempts cut in two since the last committed row
+        self._cut_work = [0, 0.0]
 
     # ------------------------------------------------------------------ set-up API
     def node_set(self, name, nodes):
@@ -586,8 +597,9 @@ class Simulation:
         info = np.zeros(R.N_INFO)
         max_iter = stage.max_iter or o.max_iter
         tol = stage.tol or o.tol
+        stall = o.stall_iter if depth < o.max_cuts else 0
         t0 = time.perf_counter()
-        self._relax(ctrl, pc, tol, max_iter, info)
+        self._relax(ctrl, pc, tol, max_iter, stall, info)
         elapsed = time.perf_counter() - t0
         status = int(info[R.I_STATUS])
         if status in (R.ST_NONFINITE, R.ST_RUNAWAY):
@@ -608,8 +620,10 @@ class Simulation:
                        f"difference limit 4 (fastest node {node}, block "
                        f"{self.model.node_block[node]}); the fictitious masses are too small for "
                        f"the stiffness: raise SolverOptions.safety (now {o.safety})")
-        if status == R.ST_MAXITER:
+        if status in (R.ST_MAXITER, R.ST_STALLED):
             self._restore(snap)
+            self._cut_work[0] += int(info[R.I_ITERS])
+            self._cut_work[1] += elapsed
             if depth >= o.max_cuts:
                 hint = ("; the out-of-balance force exceeds the loads: an unstable step (safety "
                         f"factor {o.safety}) or a structure that lost equilibrium"
@@ -625,17 +639,17 @@ class Simulation:
         self.dctl_prev = dctl
         self._commit(info, elapsed, stage, indirect)
 
-    def _relax(self, ctrl, pc, tol, max_iter, info):
+    def _relax(self, ctrl, pc, tol, max_iter, stall, info):
         """Relax the increment (``R.relax``); with ``options.coarse``, in spans of
         ``coarse_every`` iterations (doubled after a rejected correction and after the tenth of
         an increment, up to 64 x; none after two rejections in a row), each preceded by a coarse
-        correction on the blocks' affine motions (:mod:`dr_masonry.coarse`). ``info`` holds the
-        totals."""
+        correction on the blocks' affine motions (:mod:`dr_masonry.coarse`); ``stall``: the
+        kernel's ``stall_iter``. ``info`` holds the totals."""
         o, d = self.options, self.dyn
         args = (DAMPING[o.damping], o.alpha, tol, self.ref_floor)
         if not self.use_coarse:
             R.relax(self.mesh, self.cont, d, self.lam, ctrl, pc, *args, max_iter, o.check_every,
-                    0.5 * self.size, info)
+                    stall, 0.5 * self.size, info)
             return
         if self.coarse is None:
             from .coarse import BlockCoarse
@@ -663,7 +677,7 @@ class Simulation:
                 every = min(2 * every, 64 * o.coarse_every)
             span = min(every, max_iter - done)
             R.relax(self.mesh, self.cont, d, self.lam, ctrl, pc, *args, span, o.check_every,
-                    0.5 * self.size, info)
+                    stall, 0.5 * self.size, info)
             done += int(info[R.I_ITERS])
             damped += info[R.I_DAMPED]
             if int(info[R.I_STATUS]) != R.ST_MAXITER or done >= max_iter:
@@ -731,6 +745,7 @@ class Simulation:
         self.increment += 1
         row = {"increment": self.increment, "iterations": info[R.I_ITERS],
                "residual": info[R.I_RESID], "time_s": elapsed, "lambda": lam,
+               "cut_iterations": self._cut_work[0], "cut_s": self._cut_work[1],
                "W_ext": w_ext, "E_stored": eint, "D_blocks": d_blocks, "D_joints": d_joints,
                "D_joint_damage": d_joints - d_friction, "D_joint_friction": d_friction,
                "E_damped": self.energy["E_damped"], "E_kinetic": info[R.I_KE],
@@ -751,6 +766,7 @@ class Simulation:
             f = fb[sl, 0].sum(axis=0) + fb[ms, 1:].sum(axis=(0, 1))
             for k in range(3):
                 row[f"{name}.f{'xyz'[k]}"] = float(f[k])
+        self._cut_work = [0, 0.0]
         for key, v in row.items():
             self.history.setdefault(key, [np.nan] * (self.increment - 1)).append(float(v))
         self._audit(row)

@@ -48,6 +48,7 @@ ST_MAXITER = 1
 ST_NONFINITE = 2
 ST_RUNAWAY = 3
 ST_UNSTABLE = 4  # viscous damping: the motion's Rayleigh quotient stays above the stable limit
+ST_STALLED = 5   # the residual ratio did not fall below STALL_DROP x its best in stall_iter iterations
 
 #: (omega dt)^2 of the central-difference stability limit, with a 5 % margin for the geometric
 #: stiffness that the Gershgorin masses do not bound
@@ -55,6 +56,8 @@ UNSTABLE_RQ = 4.2
 #: iterations above it (a count halved every UNSTABLE_WINDOW iterations) that stop an increment
 UNSTABLE_COUNT = 25
 UNSTABLE_WINDOW = 1000
+#: progress of an increment: its residual ratio falls below this fraction of its last best
+STALL_DROP = 0.5
 
 # layout of the info vector
 I_ITERS = 0
@@ -67,7 +70,9 @@ I_QTY = 6        # the offending value (unstable: the Rayleigh quotient (omega d
 I_REF = 7        # reference force norm, N
 I_EINT = 8       # stored energy (hexahedra + joints), J
 I_OVER = 9       # unstable-step count (read and written: it carries over the calls of an increment)
-N_INFO = 10
+I_GOAL = 10      # residual ratio that counts as progress (read and written; <= 0: none yet)
+I_SINCE = 11     # iterations since the last progress (read and written)
+N_INFO = 12
 
 
 @jit
@@ -180,7 +185,7 @@ def norms(dyn, lam, rpres):
 
 @jit
 def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, tol, ref_floor, max_iter,
-          check_every, u_limit, info):
+          check_every, stall_iter, u_limit, info):
     """Iterate one load increment to rest.
 
     Parameters
@@ -205,6 +210,12 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, tol, ref_floor
         exceeds the limit now and then) stop the loop with ST_UNSTABLE.
     tol : float
         converged when ||r_free|| <= tol * max(reference, ref_floor).
+    stall_iter : int
+        stop with ST_STALLED when the residual ratio has not fallen below ``STALL_DROP`` times
+        its best value for this many iterations (a relaxation that hovers above ``tol``, e.g.
+        joints chattering at a mechanism's onset; the solver cuts the increment); 0: never.
+        The progress marks ``info[I_GOAL]``, ``info[I_SINCE]`` carry over the calls of an
+        increment.
     u_limit : float
         run-away guard: any displacement above it (m) stops the loop.
     info : (N_INFO,) float64 written.
@@ -230,6 +241,9 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, tol, ref_floor
     a_mix = alpha
     n_pos = 0
     n_over = info[I_OVER]
+    goal = info[I_GOAL]
+    since = info[I_SINCE]
+    last_check = 0
     place_rigid_nodes(dyn)
     for it in range(1, max_iter + 1):
         eint = internal_forces(mesh, cont, dyn)
@@ -256,6 +270,17 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, tol, ref_floor
                 break
             if rn <= tol * max(ref, ref_floor) and it > 1:
                 status = ST_CONVERGED
+                break
+            ratio = rn / max(ref, ref_floor)
+            if ratio <= goal or goal <= 0.0:
+                goal = STALL_DROP * ratio
+                since = 0.0
+            else:
+                since += it - last_check
+            last_check = it
+            if stall_iter > 0 and since >= stall_iter:
+                status = ST_STALLED
+                qty = ratio
                 break
         # ---- velocity update ----------------------------------------------------------
         c_visc = 0.0
@@ -418,6 +443,8 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, tol, ref_floor
     info[I_RESID] = rn / max(ref, ref_floor)
     info[I_KE] = ke
     info[I_DAMPED] = damped
+    info[I_GOAL] = goal
+    info[I_SINCE] = since
     info[I_WORST] = worst
     info[I_QTY] = qty
     info[I_REF] = ref

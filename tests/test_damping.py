@@ -81,7 +81,7 @@ def test_fire_iteration_matches_numpy_reference():
     sim, _ = _loaded_column()
     info = np.zeros(R.N_INFO)
     R.relax(sim.mesh, sim.cont, sim.dyn, np.zeros(1), np.zeros(3, np.int64), 1.0, R.DAMP_FIRE, 0.1,
-            1e-300, sim.ref_floor, n_iter, 10 ** 9, 1.0, info)
+            1e-300, sim.ref_floor, n_iter, 10 ** 9, 0, 1.0, info)
     assert info[R.I_ITERS] == n_iter and info[R.I_STATUS] == R.ST_MAXITER
     assert np.abs(ref.dyn.rpU).max() > 1e-6  # it moved
     scale = np.abs(ref.dyn.U).max()
@@ -138,3 +138,45 @@ def test_fire_is_a_known_scheme():
     assert SolverOptions(damping="fire").alpha == 0.1
     with pytest.raises(ValueError, match="damping"):
         SolverOptions(damping="FIRE")
+
+
+def _relax(sim, scheme, alpha, tol, iters, stall, info):
+    R.relax(sim.mesh, sim.cont, sim.dyn, np.zeros(1), np.zeros(3, np.int64), 1.0, scheme, alpha,
+            tol, sim.ref_floor, iters, 10, stall, 1.0, info)
+
+
+def test_stall_rule_counts_iterations_without_progress():
+    """A free block under a constant force accelerates undamped: its residual ratio stays 1 and
+    never halves, so ``stall_iter`` = 500 stops the loop at the first check (every 10
+    iterations) 500 iterations after the first one, also when the increment is relaxed in two
+    calls (300 + the rest: the count carries over); ``stall_iter`` = 0 never stops."""
+    m = Model()
+    m.add_box((0, 0, 0), (0.22, 0.102, 0.081), PlasticDamage.elastic(5e9, 0.2, 2000.0), (1, 1, 1))
+    for stall, calls, status, total in ((500, (1000,), R.ST_STALLED, 510),
+                                        (500, (300, 1000), R.ST_STALLED, 510),
+                                        (0, (1000,), R.ST_MAXITER, 1000)):
+        sim = Simulation(m, SolverOptions(coarse=False))
+        sim.build()
+        sim.dyn.fext[:, 0] = 10.0   # N per node, far above the reference floor
+        info = np.zeros(R.N_INFO)
+        done = 0
+        for iters in calls:
+            _relax(sim, R.DAMP_VISCOUS, 0.0, 1e-300, iters, stall, info)
+            done += int(info[R.I_ITERS])
+        assert int(info[R.I_STATUS]) == status
+        assert done == total
+        assert info[R.I_RESID] == pytest.approx(1.0, rel=1e-9)
+
+
+def test_stall_rule_does_not_touch_a_converging_relaxation():
+    """On a relaxation that keeps converging the rule only observes: the same iterations and the
+    same displacements with and without it."""
+    runs = []
+    for stall in (0, 200):
+        sim, _ = _loaded_column()
+        info = np.zeros(R.N_INFO)
+        _relax(sim, R.DAMP_VISCOUS, 1.0, 1e-8, 100_000, stall, info)
+        assert int(info[R.I_STATUS]) == R.ST_CONVERGED
+        runs.append((int(info[R.I_ITERS]), sim.dyn.rpU.copy()))
+    assert runs[0][0] == runs[1][0] > 200
+    np.testing.assert_array_equal(runs[0][1], runs[1][1])

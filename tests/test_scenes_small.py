@@ -86,6 +86,53 @@ def test_unstable_run_stops_with_diagnosis(tmp_path):
     assert r.n_history == 0
 
 
+def test_unconverged_increment_is_cut_and_accounted(monkeypatch):
+    """An increment that reaches the iteration cap is restored and cut in two: the run still
+    follows the joint law (peak ft within 1 %, nothing left at the end), and the work of every
+    cut attempt (cap iterations each, one extra row per cut) is booked in ``cut_iterations`` and
+    ``cut_s``; an increment whose residual stalls (``stall_iter``) is cut the same way; without
+    cuts left the run stops naming the increment and the cap."""
+    law = JointLaw.reference()
+    sim, stages = couplet.build(dict(couplet.PARAMS, h5=None))
+    sim.options.max_iter = 35       # several couplet increments need 40 iterations
+    hist = sim.run(stages)
+    n = couplet.PARAMS["increments"]
+    extra = hist["iterations"].size - n
+    assert extra > 0
+    assert hist["cut_iterations"].sum() == extra * 35
+    assert np.all(hist["cut_s"][hist["cut_iterations"] > 0] > 0)
+    assert np.all(hist["cut_s"][hist["cut_iterations"] == 0] == 0)
+    stress = hist["platen.fz"] / (couplet.L * couplet.T)
+    assert stress.max() == pytest.approx(law.ft, rel=0.01)
+    assert abs(stress[-1]) < 1e-3 * law.ft
+    # a relaxation that reports a stall whenever the rule is on is cut down to the last allowed
+    # depth, where the rule is off (each increment: 3 stalled attempts booked on 2 rows, then
+    # 4 quarters)
+    import dr_masonry.solver as S
+    real = S.R.relax
+
+    def stalling(*args):
+        real(*args)
+        if args[-3] > 0:                       # stall_iter
+            args[-1][S.R.I_STATUS] = S.R.ST_STALLED
+
+    sim, stages = couplet.build(dict(couplet.PARAMS, h5=None))
+    sim.options.max_cuts, sim.options.coarse = 2, False
+    monkeypatch.setattr(S.R, "relax", stalling)
+    hist = sim.run(stages)
+    monkeypatch.setattr(S.R, "relax", real)
+    assert hist["iterations"].size == 4 * n
+    assert np.count_nonzero(hist["cut_iterations"]) == 2 * n
+    assert hist["platen.uz"][-1] == pytest.approx(couplet.PARAMS["u_max"], rel=1e-9)
+    stress = hist["platen.fz"] / (couplet.L * couplet.T)
+    assert stress.max() == pytest.approx(law.ft, rel=0.01)
+    sim, stages = couplet.build(dict(couplet.PARAMS, h5=None))
+    sim.options.max_iter, sim.options.max_cuts = 35, 0
+    with pytest.raises(SolverError, match=r"increment \d+ of stage 'tension' did not converge in "
+                                          r"35 iterations after 0 cuts"):
+        sim.run(stages)
+
+
 def test_non_finite_state_is_caught(tmp_path):
     """A NaN in the displacement field stops the run with the node and block named."""
     sim, stages = couplet.build(dict(couplet.PARAMS, h5=None))
