@@ -24,8 +24,8 @@ its fracture energy; all of these), ``shear_damage=paper`` the literal eq. (7) o
 
 Run: ``python cases/squat_wall.py [key=value ...]`` (or ``dr-masonry run squat_wall``). The
 default, coarse monotonic run (one hexahedron per brick, 5260 nodes, 5036 contacts; 30 graded
-increments to 1 % drift) took about 10 minutes on 2 shared cores (5000-11000 iterations per
-increment past the peak, 3 ms per iteration); ``mesh=fine`` (4 x 1 x 2 hexahedra per brick,
+increments to 1 % drift) took 15 minutes on one thread (2026-11-29: 38 increments after 4 cuts,
+480-20,000 iterations per increment past the peak, 2.9 ms per iteration); ``mesh=fine`` (4 x 1 x 2 hexahedra per brick,
 20000 nodes) costs about 5 times more per iteration and is a long validation run.
 The energy balance error of these coarse increments reaches a few per cent (trapezoidal rule of
 the external work over large steps; it shrinks with the step, see tests/test_walls.py).
