@@ -23,10 +23,12 @@ paper Fig. 18 (doubled ft and u_k; c and delta_k; tan(phi) and mu; block compres
 its fracture energy; all of these), ``shear_damage=paper`` the literal eq. (7) of the paper.
 
 Run: ``python cases/squat_wall.py [key=value ...]`` (or ``dr-masonry run squat_wall``). The
-default, coarse monotonic run (one hexahedron per brick, 5260 nodes, 5036 contacts; 30 graded
-increments to 1 % drift) took 15 minutes on one thread (2026-11-29: 38 increments after 4 cuts,
-480-20,000 iterations per increment past the peak, 2.9 ms per iteration); ``mesh=fine`` (4 x 1 x 2 hexahedra per brick,
-20000 nodes) costs about 5 times more per iteration and is a long validation run.
+default, coarse monotonic run (one hexahedron per brick, 5260 nodes, 5036 contacts; 60 graded
+increments to 1 % drift: 30 put the peak 5.7 % low, BENCHMARKS.md section 11) took 31 minutes on
+one thread sharing 2 cores with two other runs (2026-11-29: 71 increments after 7 cuts, 4,570
+iterations per increment + 116,140 in cut attempts, 4.3 ms per iteration under that load);
+``mesh=fine`` (4 x 1 x 2 hexahedra per brick, 20000 nodes) costs about 5 times more per iteration
+and is a long validation run.
 The energy balance error of these coarse increments reaches a few per cent (trapezoidal rule of
 the external work over large steps; it shrinks with the step, see tests/test_walls.py).
 ``fast=true`` runs a 0.88 x 0.81 m coarse wall in a few increments (test suite).
@@ -51,7 +53,7 @@ PARAMS = dict(
     bc="cantilever",        # cantilever (beam rotation free) | double_clamped (held)
     protocol="monotonic",   # monotonic | cyclic
     drift=S5.monotonic,     # monotonic target, % of the height
-    increments=30,          # increments of the monotonic push
+    increments=60,          # increments of the monotonic push (30: peak 5.7 % low)
     grading=1.5,            # monotonic: i-th target = drift * (i / increments) ** grading
     step=0.5 * mm,          # cyclic: largest displacement per increment, m
     n_amplitudes=0,         # cyclic: run only the first n amplitudes (0: all)
