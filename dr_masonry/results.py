@@ -244,24 +244,23 @@ class ResultWriter:
                 d.attrs["units"] = STANDARD_FIELDS[k][2]
         self.flush()
 
-    def truncate(self, increment):
-        """Drop the frames after ``increment`` and the history rows written after that frame.
+    def truncate(self, increment, rows):
+        """Drop the frames after ``increment`` and the history rows after the first ``rows``.
 
-        Used on restart from frame ``increment`` so that the continued run does not duplicate
-        rows.
+        Used on restart from the checkpoint written after ``increment`` (``rows``: the history
+        length then; the checkpoint need not coincide with a frame) so that the continued run
+        does not duplicate rows.
         """
+        h = self._f["history"]
+        n = self.n_history
+        if not 0 <= rows <= n:
+            raise ResultsError(f"truncate: {self.path} has {n} history rows, cannot keep {rows}")
         frames = self._f["frames"]
-        name = _frame_name(increment)
-        if name not in frames:
-            raise ResultsError(f"truncate: no frame {increment} in {self.path} "
-                               f"(frames: {self.frame_ids})")
-        keep = int(frames[name].attrs["history_rows"])
         for k in list(frames):
             if int(k) > int(increment):
                 del frames[k]
-        h = self._f["history"]
         for k in _columns(h):
-            h[k].resize((keep,))
+            h[k].resize((rows,))
         self.flush()
 
     def write_checkpoint(self, increment, arrays, meta):

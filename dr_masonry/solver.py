@@ -897,4 +897,4 @@ class Simulation:
             stored = L.StoredPattern(name, arrays[f"pattern_P/{name}"], arrays[f"pattern_rpP/{name}"])
             self.patterns[name] = (stored, stored.P, stored.rpP)
         self.increment = inc
-        self.writer.truncate(inc)
+        self.writer.truncate(inc, len(self.history.get("increment", ())))

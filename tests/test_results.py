@@ -196,7 +196,9 @@ def test_append_restart(tmp_path):
     p = tmp_path / "r.h5"
     m, _ = write_fake_result(p)
     with ResultWriter(p, m, {"restart": True}, mode="a") as w:
-        w.truncate(2)      # restart from frame 2 (written after row 2): drop frame 4, rows 3, 4
+        with pytest.raises(ResultsError, match="cannot keep 9"):
+            w.truncate(2, 9)
+        w.truncate(2, 3)   # restart after increment 2 (3 rows, increments 0-2): drop frame 4
         assert w.frame_ids == [0, 2] and w.n_history == 3
         w.append_history({"increment": 3, "disp": 7.0, "force": 8.0})
         w.write_frame(3, fake_fields(m, 3))

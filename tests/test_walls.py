@@ -226,10 +226,10 @@ def test_interrupted_run_resumes(tmp_path, monkeypatch, squat):
 
 def test_checkpoint_between_frames(tmp_path, monkeypatch):
     """With checkpoint_s = 0 the restart data follow every increment even when frames are
-    sparse: an interrupted run loses no row."""
+    sparse: an interrupted run loses no row and resumes from an increment without a frame."""
     from dr_masonry.results import open_result
-    from dr_masonry.solver import SolverOptions
-    init = SolverOptions.__init__
+    from dr_masonry.solver import Simulation, SolverOptions
+    init, commit = SolverOptions.__init__, Simulation._commit
 
     def every_increment(self, *a, **k):
         init(self, *a, **k)
@@ -241,5 +241,13 @@ def test_checkpoint_between_frames(tmp_path, monkeypatch):
         squat_wall.run(params)
     r = open_result(params["h5"])
     assert r.frame_ids == [2] and r.checkpoint()[0] == 6   # the increment before the interrupt
+    monkeypatch.setattr(Simulation, "_commit", commit)
+    sim, hist, _ = squat_wall.run(dict(params, resume=True))
+    sim.close()
+    sim, whole, _ = squat_wall.run(dict(params, h5=str(tmp_path / "whole.h5")))
+    sim.close()
+    assert np.array_equal(hist["increment"], whole["increment"])
+    assert np.allclose(hist["beam.fx"], whole["beam.fx"], rtol=1e-3, atol=1.0)
+    assert open_result(params["h5"]).n_history == whole["increment"].size
     with pytest.raises(ValueError, match="checkpoint_s"):
         SolverOptions(checkpoint_s=-1.0)
