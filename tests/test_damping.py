@@ -72,6 +72,12 @@ def fire_reference(sim, n_iter, alpha):
         R.place_rigid_nodes(d)
 
 
+def _relax(sim, scheme, alpha, tol, iters, stall, info, check_every=10):
+    """``R.relax`` on ``sim`` with no load factor or control, run-away limit 1 m."""
+    R.relax(sim.mesh, sim.cont, sim.dyn, np.zeros(1), np.zeros(3, np.int64), 1.0, scheme, alpha,
+            tol, sim.ref_floor, iters, check_every, stall, 1.0, info)
+
+
 def test_fire_iteration_matches_numpy_reference():
     """300 iterations of the compiled FIRE loop (stops and step growth included) equal the
     numpy FIRE step by step, rigid point included."""
@@ -80,8 +86,7 @@ def test_fire_iteration_matches_numpy_reference():
     fire_reference(ref, n_iter, 0.1)
     sim, _ = _loaded_column()
     info = np.zeros(R.N_INFO)
-    R.relax(sim.mesh, sim.cont, sim.dyn, np.zeros(1), np.zeros(3, np.int64), 1.0, R.DAMP_FIRE, 0.1,
-            1e-300, sim.ref_floor, n_iter, 10 ** 9, 0, 1.0, info)
+    _relax(sim, R.DAMP_FIRE, 0.1, 1e-300, n_iter, 0, info, check_every=10 ** 9)
     assert info[R.I_ITERS] == n_iter and info[R.I_STATUS] == R.ST_MAXITER
     assert np.abs(ref.dyn.rpU).max() > 1e-6  # it moved
     scale = np.abs(ref.dyn.U).max()
@@ -138,11 +143,6 @@ def test_fire_is_a_known_scheme():
     assert SolverOptions(damping="fire").alpha == 0.1
     with pytest.raises(ValueError, match="damping"):
         SolverOptions(damping="FIRE")
-
-
-def _relax(sim, scheme, alpha, tol, iters, stall, info):
-    R.relax(sim.mesh, sim.cont, sim.dyn, np.zeros(1), np.zeros(3, np.int64), 1.0, scheme, alpha,
-            tol, sim.ref_floor, iters, 10, stall, 1.0, info)
 
 
 def test_stall_rule_counts_iterations_without_progress():
