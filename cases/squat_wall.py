@@ -66,6 +66,7 @@ PARAMS = dict(
     tol=1e-4,
     damping="viscous",
     coarse=True,            # two-level relaxation (SolverOptions.coarse)
+    max_dissipation=0.0,    # load-step control (SolverOptions.max_dissipation; 0: off)
     frames=5,               # write a field frame every this many increments
     resume=False,           # continue the run stored in out.h5 from its last checkpoint
     fast=False,             # preset FAST: tiny 0.88 x 0.81 m coarse wall, few increments
@@ -140,6 +141,7 @@ def rig(params, law, block):
     beam_block = add_beam(model, (0, 0, H), (L, t, hb), STEEL, element_size=esize)
     sim = Simulation(model, SolverOptions(tol=params["tol"], damping=params["damping"],
                                           coarse=params["coarse"],
+                                          max_dissipation=params["max_dissipation"],
                                           progress=params.get("progress", False)),
                      output=params.get("h5"), config=params)
     beam = sim.rigid_point("beam", blocks=[beam_block], position=(0.5 * L, 0.5 * t, H))

@@ -19,7 +19,8 @@ def scene_params(defaults, fast, argv, doc):
 
 
 #: parameters that may differ when a run is continued: how it is solved and written, not what
-SOLVER_KEYS = {"resume", "progress", "out", "h5", "frames", "tol", "damping", "coarse", "solver"}
+SOLVER_KEYS = {"resume", "progress", "out", "h5", "frames", "tol", "damping", "coarse", "solver",
+               "max_dissipation"}
 
 
 def run_stages(sim, stages, params):

@@ -64,6 +64,12 @@ class SolverOptions:
         relaxation can hover just above ``tol`` for the whole cap while the two halves converge
         in a few thousand iterations each (BENCHMARKS.md, section 10); at the last allowed cut
         the increment runs to ``max_iter``
+    max_dissipation : load-step control, off by default (0): a converged increment whose damage
+        dissipation (blocks, and joints without friction) exceeds this fraction of the external
+        work done so far is cut in two (accepted at the last allowed cut). Where many joints
+        soften at once a large step jumps across the peak (S5 with 30 increments: 5.7 % low,
+        BENCHMARKS.md section 11); 0.05 refines the steps there only. Each accepted increment's
+        ratio is the history column ``dissipation_ratio``
     check_every : iterations between convergence checks
     energy_tol : energy-balance error above which a warning is recorded; the error is
         W_ext - E_stored - D_blocks - D_joints relative to the gross external work
@@ -87,6 +93,7 @@ class SolverOptions:
     max_iter: int = 200_000
     max_cuts: int = 4
     stall_iter: int = 10_000
+    max_dissipation: float = 0.0
     check_every: int = 10
     energy_tol: float = 0.01
     predictor: bool = True
@@ -109,6 +116,9 @@ class SolverOptions:
         if self.coarse not in (True, False, "auto"):
             raise ValueError(f"SolverOptions.coarse must be True, False or 'auto', got "
                              f"{self.coarse!r}")
+        if not (np.isfinite(self.max_dissipation) and self.max_dissipation >= 0):
+            raise ValueError(f"SolverOptions.max_dissipation must be >= 0 (0: off), got "
+                             f"{self.max_dissipation}")
         if not (np.isfinite(self.checkpoint_s) and self.checkpoint_s >= 0):
             raise ValueError(f"SolverOptions.checkpoint_s must be >= 0 s, got {self.checkpoint_s}")
         if (self.max_iter < 1 or self.check_every < 1 or self.max_cuts < 0
@@ -620,7 +630,10 @@ class Simulation:
                        f"difference limit 4 (fastest node {node}, block "
                        f"{self.model.node_block[node]}); the fictitious masses are too small for "
                        f"the stiffness: raise SolverOptions.safety (now {o.safety})")
-        if status in (R.ST_MAXITER, R.ST_STALLED):
+        energies = self._energies() if status == R.ST_CONVERGED else None
+        too_much = (energies is not None and o.max_dissipation > 0 and depth < o.max_cuts
+                    and energies[3] > o.max_dissipation)
+        if status in (R.ST_MAXITER, R.ST_STALLED) or too_much:
             self._restore(snap)
             self._cut_work[0] += int(info[R.I_ITERS])
             self._cut_work[1] += elapsed
@@ -637,7 +650,7 @@ class Simulation:
             return
         self.du_prev = (d.U - u_before) * d.free
         self.dctl_prev = dctl
-        self._commit(info, elapsed, stage, indirect)
+        self._commit(info, elapsed, energies)
 
     def _relax(self, ctrl, pc, tol, max_iter, stall, info):
         """Relax the increment (``R.relax``); with ``options.coarse``, in spans of
@@ -715,18 +728,32 @@ class Simulation:
             self.writer.flush()
         raise SolverError(msg)
 
-    def _commit(self, info, elapsed, stage, indirect):
-        """Accept a converged increment: energies, reactions, history row, state commit."""
+    def _energies(self):
+        """Forces and state at the current displacements and the energies of the increment so
+        far: (stored energy J, external forces incl. reactions (n_nodes, 3) N, work increment
+        per DOF (n_nodes, 3) J, damage dissipation of the increment / external work done)."""
+        d, mesh, cont = self.dyn, self.mesh, self.cont
+        eint = R.internal_forces(mesh, cont, d)
+        # external forces incl. reactions: applied loads on free DOFs, internal forces elsewhere
+        f_tot = np.where(d.free > 0, d.fext + self.lam[0] * d.P, d.fint)
+        dw = 0.5 * (f_tot + self.f_prev) * (d.U - self._u_committed)
+        ddiss = float(((mesh.s_new[:, :, MS_DISS] - mesh.s_old[:, :, MS_DISS]) * mesh.wdet).sum())
+        if cont.slave.size:
+            dj = (cont.s_new[:, JS_DISS] - cont.s_new[:, JS_DISSF]
+                  - cont.s_old[:, JS_DISS] + cont.s_old[:, JS_DISSF])
+            ddiss += float(dj @ cont.area)
+        w_ext = self.energy["W_ext"] + float(dw.sum())
+        return eint, f_tot, dw, (ddiss / w_ext if w_ext > 0 else 0.0)
+
+    def _commit(self, info, elapsed, energies):
+        """Accept a converged increment (``energies`` from :meth:`_energies` at its end):
+        reactions, history row, state commit."""
         d = self.dyn
         mesh, cont = self.mesh, self.cont
-        eint = R.internal_forces(mesh, cont, d)
+        eint, f_tot, dw, ratio = energies
         rpres = np.zeros((d.rpX.shape[0], 6))
         R.residual(d, self.lam[0], rpres)
         lam = float(self.lam[0])
-        # external forces incl. reactions: applied loads on free DOFs, internal forces elsewhere
-        f_tot = np.where(d.free > 0, d.fext + lam * d.P, d.fint)
-        du = d.U - self._u_committed
-        dw = 0.5 * (f_tot + self.f_prev) * du
         self.energy["W_ext"] += float(dw.sum())
         # gross work: the scale of the balance error when works of opposite sign cancel (rocking)
         self.energy["W_gross"] = self.energy.get("W_gross", 0.0) + float(np.abs(dw).sum())
@@ -746,7 +773,7 @@ class Simulation:
         row = {"increment": self.increment, "iterations": info[R.I_ITERS],
                "residual": info[R.I_RESID], "time_s": elapsed, "lambda": lam,
                "cut_iterations": self._cut_work[0], "cut_s": self._cut_work[1],
-               "W_ext": w_ext, "E_stored": eint, "D_blocks": d_blocks, "D_joints": d_joints,
+               "dissipation_ratio": ratio, "W_ext": w_ext, "E_stored": eint, "D_blocks": d_blocks, "D_joints": d_joints,
                "D_joint_damage": d_joints - d_friction, "D_joint_friction": d_friction,
                "E_damped": self.energy["E_damped"], "E_kinetic": info[R.I_KE],
                "balance_error": err / self.energy["W_gross"] if self.energy["W_gross"] > 0 else 0.0,

@@ -145,6 +145,12 @@ def test_fire_is_a_known_scheme():
         SolverOptions(damping="FIRE")
 
 
+def test_dissipation_bound_is_validated():
+    for bad in (-0.1, np.nan, np.inf):
+        with pytest.raises(ValueError, match="max_dissipation"):
+            SolverOptions(max_dissipation=bad)
+
+
 def test_stall_rule_counts_iterations_without_progress():
     """A free block under a constant force accelerates undamped: its residual ratio stays 1 and
     never halves, so ``stall_iter`` = 500 stops the loop at the first check (every 10
