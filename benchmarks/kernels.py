@@ -11,7 +11,8 @@ along, thickness, height) built by ``dr_masonry.geometry.add_wall``:
   runs ``relax_iters`` iterations), ns per element-iteration;
 * on each thread count of ``threads`` and each wall size of ``sizes``;
 * first-call compile time in a fresh subprocess with an empty ``NUMBA_CACHE_DIR``, then the cached
-  warm start in a second subprocess on the same cache (``compile=0`` skips both).
+  warm start in a second subprocess on the same cache (``compile=0`` skips both, ``steady=0``
+  runs only them).
 
 Timings are best and median of ``repeats`` batches of at least ``min_time`` s each; the machine is
 shared, so compare ratios within one run. Run: ``python benchmarks/kernels.py [key=value ...]``;
@@ -34,6 +35,7 @@ PARAMS = dict(
     repeats=5,
     min_time=0.2,               # s per timed batch
     relax_iters=100,
+    steady=True,                # steady-state timings (steady=0: only the compile/cache starts)
     compile=True,
     mode="all",                 # "all" or "firstcall" (used by the compile subprocesses)
 )
@@ -221,9 +223,10 @@ def main(argv=None):
         return
     import numba
     print(f"machine: {machine()}")
-    steady(params)
-    print(f"numba threading layer used: {numba.threading_layer()}, "
-          f"OMP_WAIT_POLICY={os.environ.get('OMP_WAIT_POLICY')}")
+    if params["steady"]:
+        steady(params)
+        print(f"numba threading layer used: {numba.threading_layer()}, "
+              f"OMP_WAIT_POLICY={os.environ.get('OMP_WAIT_POLICY')}")
     if params["compile"]:
         compile_times()
 
