@@ -40,6 +40,9 @@ COARSE_MIN_BLOCKS = 30
 #: warn (once per run) when a joint node has slid off its master block's face by more than this
 #: fraction of the face's shortest edge: contact points are paired in the reference configuration
 OVERHANG_WARN = 0.05
+#: load-step control: a half step that dissipates this fraction of its whole step's dissipation
+#: or more holds a jump (smooth softening gives about one half) and is not cut again
+JUMP = 0.75
 
 
 class SolverError(RuntimeError):
@@ -585,7 +588,10 @@ class Simulation:
         self.values = dict(snap[8])
         self.factors = dict(snap[9])
 
-    def _increment(self, stage, targets, goal, indirect, depth):
+    def _increment(self, stage, targets, goal, indirect, depth, parent_diss=None):
+        """Relax one increment to ``goal`` and commit it, or cut it in two and recurse;
+        ``parent_diss``: the damage dissipation (J) of the attempt this half replaces when that
+        one was cut for dissipating too much."""
         o = self.options
         d = self.dyn
         snap = self._snapshot()
@@ -631,8 +637,11 @@ class Simulation:
                        f"{self.model.node_block[node]}); the fictitious masses are too small for "
                        f"the stiffness: raise SolverOptions.safety (now {o.safety})")
         energies = self._energies() if status == R.ST_CONVERGED else None
+        # a half that dissipates as much as the whole step holds a jump (a crack that runs
+        # unstably): smaller steps would only repeat it, so it is accepted
         too_much = (energies is not None and o.max_dissipation > 0 and depth < o.max_cuts
-                    and energies[3] > o.max_dissipation)
+                    and energies[3] > o.max_dissipation
+                    and not (parent_diss is not None and energies[4] >= JUMP * parent_diss))
         if status in (R.ST_MAXITER, R.ST_STALLED) or too_much:
             self._restore(snap)
             self._cut_work[0] += int(info[R.I_ITERS])
@@ -645,8 +654,9 @@ class Simulation:
                            f"in {max_iter} iterations after {depth} cuts (residual ratio "
                            f"{info[R.I_RESID]:.2e} > tol {tol:.1e}){hint}")
             mid = {k: 0.5 * (start[k] + goal[k]) for k in goal}
-            self._increment(stage, targets, mid, indirect, depth + 1)
-            self._increment(stage, targets, goal, indirect, depth + 1)
+            diss = energies[4] if too_much else None
+            self._increment(stage, targets, mid, indirect, depth + 1, diss)
+            self._increment(stage, targets, goal, indirect, depth + 1, diss)
             return
         self.du_prev = (d.U - u_before) * d.free
         self.dctl_prev = dctl
@@ -731,7 +741,8 @@ class Simulation:
     def _energies(self):
         """Forces and state at the current displacements and the energies of the increment so
         far: (stored energy J, external forces incl. reactions (n_nodes, 3) N, work increment
-        per DOF (n_nodes, 3) J, damage dissipation of the increment / external work done)."""
+        per DOF (n_nodes, 3) J, damage dissipation of the increment / external work done, that
+        dissipation J)."""
         d, mesh, cont = self.dyn, self.mesh, self.cont
         eint = R.internal_forces(mesh, cont, d)
         # external forces incl. reactions: applied loads on free DOFs, internal forces elsewhere
@@ -743,14 +754,14 @@ class Simulation:
                   - cont.s_old[:, JS_DISS] + cont.s_old[:, JS_DISSF])
             ddiss += float(dj @ cont.area)
         w_ext = self.energy["W_ext"] + float(dw.sum())
-        return eint, f_tot, dw, (ddiss / w_ext if w_ext > 0 else 0.0)
+        return eint, f_tot, dw, (ddiss / w_ext if w_ext > 0 else 0.0), ddiss
 
     def _commit(self, info, elapsed, energies):
         """Accept a converged increment (``energies`` from :meth:`_energies` at its end):
         reactions, history row, state commit."""
         d = self.dyn
         mesh, cont = self.mesh, self.cont
-        eint, f_tot, dw, ratio = energies
+        eint, f_tot, dw, ratio = energies[:4]
         rpres = np.zeros((d.rpX.shape[0], 6))
         R.residual(d, self.lam[0], rpres)
         lam = float(self.lam[0])

@@ -136,8 +136,9 @@ def test_unconverged_increment_is_cut_and_accounted(monkeypatch):
 def test_dissipation_control_refines_the_peak():
     """S1 in 8 increments (cubic spacing): with the control off the peak falls between two
     increments and is missed by 10 %; with ``max_dissipation`` (0.05) the increments that dissipate
-    more than 5 % of the work done so far are halved, the peak lands within 1 % of ft and every
-    row above the bound is one of the finest allowed steps (1 / 2^max_cuts of its increment)."""
+    more than 5 % of the work done so far are halved, the peak lands within 1 % of ft, and a row
+    above the bound is a half (1 / 2^k of its increment, k >= 1: the finest allowed step, or a
+    half that dissipated as much as its whole step), never a whole increment."""
     law = JointLaw.reference()
     n, peaks = 8, {}
     for md in (0.0, 0.05):
@@ -153,7 +154,9 @@ def test_dissipation_control_refines_the_peak():
     whole = np.diff(path)[np.searchsorted(path, u - 1e-12) - 1]   # the increment of each row
     over = hist["dissipation_ratio"] > 0.05
     assert over.any() and hist["iterations"].size > n
-    assert np.allclose(step[over], whole[over] / 2 ** sim.options.max_cuts, rtol=1e-6)
+    k = np.log2(whole[over] / step[over])
+    assert np.allclose(k, np.round(k), atol=1e-6) and np.all(k > 0.5)
+    assert np.all(k < sim.options.max_cuts + 0.5)
     assert hist["cut_iterations"].sum() > 0     # the rejected attempts are booked
 
 
