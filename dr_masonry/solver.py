@@ -70,9 +70,10 @@ class SolverOptions:
     max_dissipation : load-step control, off by default (0): a converged increment whose damage
         dissipation (blocks, and joints without friction) exceeds this fraction of the external
         work done so far is cut in two (accepted at the last allowed cut). Where many joints
-        soften at once a large step jumps across the peak (S5 with 30 increments: 5.7 % low,
-        BENCHMARKS.md section 11); 0.05 refines the steps there only. Each accepted increment's
-        ratio is the history column ``dissipation_ratio``
+        soften at once a large step jumps across the peak; with 0.05 a single joint's peak is
+        found in 8 increments, but on the S5 wall the refined steps cost 5 x the iterations of
+        twice as many uniform ones (BENCHMARKS.md section 12). Each accepted increment's ratio
+        is the history column ``dissipation_ratio``
     check_every : iterations between convergence checks
     energy_tol : energy-balance error above which a warning is recorded; the error is
         W_ext - E_stored - D_blocks - D_joints relative to the gross external work
