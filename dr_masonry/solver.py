@@ -176,6 +176,7 @@ class Simulation:
         self.increment = 0
         # iterations and relaxation seconds of attempts cut in two since the last committed row
         self._cut_work = [0, 0.0]
+        self._bar = None   # progress bar of a running ``run`` call
 
     # ------------------------------------------------------------------ set-up API
     def node_set(self, name, nodes):
@@ -476,14 +477,14 @@ class Simulation:
         except ImportError:  # pragma: no cover
             tqdm = None
         total = sum(s.increments for s in stages[k0:]) - i0
-        bar = tqdm(total=total, disable=not self.options.progress, unit="incr") if tqdm else None
+        self._bar = tqdm(total=total, disable=not self.options.progress, unit="incr") if tqdm else None
         try:
             for k, stage in enumerate(stages[k0:], start=k0):
-                self._run_stage(stage, bar, (k, len(stages)),
-                                *((i0, starts) if k == k0 else (0, None)))
+                self._run_stage(stage, (k, len(stages)), *((i0, starts) if k == k0 else (0, None)))
         finally:
-            if bar is not None:
-                bar.close()
+            if self._bar is not None:
+                self._bar.close()
+                self._bar = None
             if self.writer is not None:
                 self.writer.flush()
         return {k: np.asarray(v) for k, v in self.history.items()}
@@ -534,7 +535,7 @@ class Simulation:
             self.writer.close()
             self.writer = None
 
-    def _run_stage(self, stage, bar, where, first=0, starts=None):
+    def _run_stage(self, stage, where, first=0, starts=None):
         """Run the increments ``first`` ... of ``stage``, number ``where[0]`` of the ``where[1]``
         stages of this ``run``; ``starts``: the controls' values at the stage's start when it is
         continued from a checkpoint (default: their current values)."""
@@ -563,10 +564,8 @@ class Simulation:
             elif (self.writer is not None and
                   time.perf_counter() - self._checkpoint_time >= self.options.checkpoint_s):
                 self._write_checkpoint()
-            if bar is not None:
-                bar.update(1)
-                bar.set_postfix_str(f"{stage.name} res={self.last_residual:.1e} "
-                                    f"it={self.last_iters}")
+            if self._bar is not None:
+                self._bar.update(1)
         if indirect is not None:
             # the pattern keeps its last factor; the control DOF is released
             self.factors[indirect.pattern.name] = float(self.lam[0])
@@ -812,6 +811,9 @@ class Simulation:
         self.last_residual = info[R.I_RESID]
         self.last_iters = int(info[R.I_ITERS])
         self.last_row = row
+        if self._bar is not None:   # every row, so that the halves of a cut increment show too
+            self._bar.set_postfix_str(f"{self.stage_name} row {self.increment} res="
+                                      f"{self.last_residual:.1e} it={self.last_iters}")
         if self.writer is not None:
             self.writer.append_history(row)
 
