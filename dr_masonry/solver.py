@@ -62,11 +62,12 @@ class SolverOptions:
     safety : fictitious masses = safety * Gershgorin row sum / 4 (stable for safety >= 1)
     max_iter : iteration cap of one increment before it is cut in two
     max_cuts : how many times an increment may be halved before the run stops
-    stall_iter : an increment whose residual ratio has not halved from its best value for this
-        many iterations is cut in two before ``max_iter`` (0: never). At a mechanism's onset the
-        relaxation can hover just above ``tol`` for the whole cap while the two halves converge
-        in a few thousand iterations each (BENCHMARKS.md, section 10); at the last allowed cut
-        the increment runs to ``max_iter``
+    stall_iter : an increment whose residual ratio has not fallen 10 % below its best value
+        (``R.STALL_DROP``) for this many iterations is cut in two before ``max_iter`` (0: never).
+        At a mechanism's onset the relaxation can hover just above ``tol`` for the whole cap
+        while the two halves converge in a few thousand iterations each (BENCHMARKS.md, section
+        10); a relaxation that converges slowly but steadily is left alone (section 13); at the
+        last allowed cut the increment runs to ``max_iter``
     max_dissipation : load-step control, off by default (0): a converged increment whose damage
         dissipation (blocks, and joints without friction) exceeds this fraction of the external
         work done so far is cut in two (accepted at the last allowed cut). Where many joints

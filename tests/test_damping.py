@@ -153,7 +153,7 @@ def test_dissipation_bound_is_validated():
 
 def test_stall_rule_counts_iterations_without_progress():
     """A free block under a constant force accelerates undamped: its residual ratio stays 1 and
-    never halves, so ``stall_iter`` = 500 stops the loop at the first check (every 10
+    never falls (by STALL_DROP), so ``stall_iter`` = 500 stops the loop at the first check (every 10
     iterations) 500 iterations after the first one, also when the increment is relaxed in two
     calls (300 + the rest: the count carries over); ``stall_iter`` = 0 never stops."""
     m = Model()
