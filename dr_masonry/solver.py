@@ -22,6 +22,8 @@ from .kernels.plastic_damage import MS_DC, MS_DISS, MS_DT
 
 Mesh = namedtuple("Mesh", "conn active dN geo wdet h emat mparams s_old s_new fbuf energy ptr rows")
 Cont = namedtuple("Cont", "slave master xi area law lparams gap0 s_old s_new gaps trac fbuf psi ptr rows")
+#: energies of an increment at its current state (:meth:`Simulation._energies`)
+Energies = namedtuple("Energies", "stored f_tot dw ratio diss")
 #: nodal state (n_nodes, 3) unless noted: X reference coordinates m, U displacements m, V velocities
 #: (m per unit fictitious step), minv (n_nodes,) inverse fictitious masses, free 1/0 per DOF, tied
 #: (n_nodes,) reference point or -1, fext constant loads N, P indirect pattern N per unit factor,
@@ -641,8 +643,8 @@ class Simulation:
         # a half that dissipates as much as the whole step holds a jump (a crack that runs
         # unstably): smaller steps would only repeat it, so it is accepted
         too_much = (energies is not None and o.max_dissipation > 0 and depth < o.max_cuts
-                    and energies[3] > o.max_dissipation
-                    and not (parent_diss is not None and energies[4] >= JUMP * parent_diss))
+                    and energies.ratio > o.max_dissipation
+                    and not (parent_diss is not None and energies.diss >= JUMP * parent_diss))
         if status in (R.ST_MAXITER, R.ST_STALLED) or too_much:
             self._restore(snap)
             self._cut_work[0] += int(info[R.I_ITERS])
@@ -655,7 +657,7 @@ class Simulation:
                            f"in {max_iter} iterations after {depth} cuts (residual ratio "
                            f"{info[R.I_RESID]:.2e} > tol {tol:.1e}){hint}")
             mid = {k: 0.5 * (start[k] + goal[k]) for k in goal}
-            diss = energies[4] if too_much else None
+            diss = energies.diss if too_much else None
             self._increment(stage, targets, mid, indirect, depth + 1, diss)
             self._increment(stage, targets, goal, indirect, depth + 1, diss)
             return
@@ -741,9 +743,9 @@ class Simulation:
 
     def _energies(self):
         """Forces and state at the current displacements and the energies of the increment so
-        far: (stored energy J, external forces incl. reactions (n_nodes, 3) N, work increment
-        per DOF (n_nodes, 3) J, damage dissipation of the increment / external work done, that
-        dissipation J)."""
+        far, as :data:`Energies`: stored energy J, external forces incl. reactions (n_nodes, 3)
+        N, work increment per DOF (n_nodes, 3) J, the increment's damage dissipation over the
+        external work done, that dissipation J."""
         d, mesh, cont = self.dyn, self.mesh, self.cont
         eint = R.internal_forces(mesh, cont, d)
         # external forces incl. reactions: applied loads on free DOFs, internal forces elsewhere
@@ -755,7 +757,7 @@ class Simulation:
                   - cont.s_old[:, JS_DISS] + cont.s_old[:, JS_DISSF])
             ddiss += float(dj @ cont.area)
         w_ext = self.energy["W_ext"] + float(dw.sum())
-        return eint, f_tot, dw, (ddiss / w_ext if w_ext > 0 else 0.0), ddiss
+        return Energies(eint, f_tot, dw, ddiss / w_ext if w_ext > 0 else 0.0, ddiss)
 
     def _commit(self, info, elapsed, energies):
         """Accept a converged increment (``energies`` from :meth:`_energies` at its end):
@@ -785,7 +787,8 @@ class Simulation:
         row = {"increment": self.increment, "iterations": info[R.I_ITERS],
                "residual": info[R.I_RESID], "time_s": elapsed, "lambda": lam,
                "cut_iterations": self._cut_work[0], "cut_s": self._cut_work[1],
-               "dissipation_ratio": ratio, "W_ext": w_ext, "E_stored": eint, "D_blocks": d_blocks, "D_joints": d_joints,
+               "dissipation_ratio": ratio, "W_ext": w_ext, "E_stored": eint, "D_blocks": d_blocks,
+               "D_joints": d_joints,
                "D_joint_damage": d_joints - d_friction, "D_joint_friction": d_friction,
                "E_damped": self.energy["E_damped"], "E_kinetic": info[R.I_KE],
                "balance_error": err / self.energy["W_gross"] if self.energy["W_gross"] > 0 else 0.0,
