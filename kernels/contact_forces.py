@@ -6,14 +6,14 @@ as internal force +F on the slave node and -N_a F on master node a. Residual = e
 """
 import numpy as np
 
-from .config import jit, pjit, prange
+from .config import ijit, pjit, prange
 from .contact_frame import contact_frame
 from .joint_law import JS_D, JS_DP1, JS_DP2, P_KC, P_KNN, P_KSS, joint_point
 
 _CHUNK = 64  # contact points per parallel task (scratch arrays are allocated once per task)
 
 
-@jit
+@ijit
 def joint_energy(p, gap, s):
     """Free energy per unit area (J/m^2) of the joint at local gap ``gap`` (3,) in state ``s``."""
     d = s[JS_D]
@@ -57,7 +57,7 @@ def contact_forces(x, slave, master, xi, area, law, lparams, gap0, s_old, s_new,
                          trac, fbuf, psi, xq, xm, frame, g, t)
 
 
-@jit
+@ijit
 def _one_contact(c, x, slave, master, xi, area, law, lparams, gap0, s_old, s_new, gaps, trac,
                  fbuf, psi, xq, xm, frame, g, t):
     """Contact point ``c`` of :func:`contact_forces`, with caller-provided scratch arrays."""

@@ -8,7 +8,7 @@ t1 = a1 / |a1|, t2 = n x t1. The local gap of slave position ``xs`` is
 """
 import numpy as np
 
-from .config import jit
+from .config import ijit, jit
 
 
 @jit
@@ -20,7 +20,7 @@ def quad_shape(r, s, out):
     out[3] = 0.25 * (1.0 - r) * (1.0 + s)
 
 
-@jit
+@ijit
 def contact_frame(xq, r, s, xm, frame):
     """Master point ``xm`` (3,) and frame rows [n, t1, t2] ``frame`` (3, 3) of quad ``xq`` (4, 3) at (r, s).
 

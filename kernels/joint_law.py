@@ -28,7 +28,7 @@ for u >= 0, kc_pen u for u < 0, tau = kss d, state never changes except the stor
 """
 import numpy as np
 
-from .config import jit, pjit, prange
+from .config import ijit, jit, pjit, prange
 
 # ---------------------------------------------------------------- parameter vector
 P_MODE = 0     # MODE_* below
@@ -104,7 +104,7 @@ def _shear_damage(p, dmax, sigma):
     return min(max(ds, 0.0), 1.0)
 
 
-@jit
+@ijit
 def joint_point(p, u, d1, d2, s_old, s_new, t):
     """Tractions and updated history of one contact point (backward Euler over the increment).
 

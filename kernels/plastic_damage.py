@@ -90,7 +90,7 @@ def curve_lookup(p, off, n, kappa, s):
             p[dd + lo] + t * (p[dd + hi] - p[dd + lo]))
 
 
-@jit
+@ijit
 def yield_value(p, i1, q, smax, sbt, sbc):
     """Yield function F (Pa) from I1, q = sqrt(3 J2), the largest principal effective stress
     ``smax`` and the effective strengths ``sbt``, ``sbc`` (Pa)."""
@@ -178,7 +178,7 @@ def elastic_stress(p, eps, sig):
         sig[i + 3] = mu * eps[i + 3]
 
 
-@jit
+@ijit
 def gp_update(p, h, eps, s_old, s_new, sig):
     """Stress update at one Gauss point.
 
