@@ -89,8 +89,9 @@ class SolverOptions:
         it saves 2-6 x the iterations before the peak; on a few blocks it only adds work,
         BENCHMARKS.md)
     checkpoint_s : between frames, write the restart data again once this many seconds of wall
-        time have passed since the last time (0: after every increment), so that an interrupted
-        long run loses at most about this much work
+        time have passed since the last time (0: after every increment, and after each committed
+        part of a cut increment), so that an interrupted long run loses at most about this much
+        work
     progress : show a progress bar
     """
     damping: str = "viscous"
@@ -559,6 +560,9 @@ class Simulation:
         self.stage_name = stage.name
         self.stage_indirect = indirect
         for i in range(first, n):
+            # a checkpoint inside increment i (after a committed part of a cut increment)
+            # continues it from there
+            self.stage_position = (where[0], i, start_values, where[1], n)
             goal = {key: vals[i] for key, (ctl, vals) in targets.items()}
             self._increment(stage, targets, goal, indirect, depth=0)
             self.stage_position = (where[0], i + 1, start_values, where[1], n)
@@ -664,6 +668,9 @@ class Simulation:
         self.du_prev = (d.U - u_before) * d.free
         self.dctl_prev = dctl
         self._commit(info, elapsed, energies)
+        if (depth > 0 and self.writer is not None
+                and time.perf_counter() - self._checkpoint_time >= o.checkpoint_s):
+            self._write_checkpoint()   # a part of a cut increment (hard increments take hours)
 
     def _relax(self, ctrl, pc, tol, max_iter, stall, info):
         """Relax the increment (``R.relax``); with ``options.coarse``, in spans of

@@ -160,6 +160,46 @@ def test_dissipation_control_refines_the_peak():
     assert hist["cut_iterations"].sum() > 0     # the rejected attempts are booked
 
 
+def test_checkpoint_inside_a_cut_increment(tmp_path, monkeypatch):
+    """With ``checkpoint_s = 0`` every committed part of a cut increment is a checkpoint: a run
+    interrupted between two parts of S1's cut second increment resumes from the first part (no
+    row lost or repeated) and ends where the uninterrupted run ends, with the same peak."""
+    from dr_masonry.results import open_result
+    from dr_masonry.solver import Simulation
+
+    def run(h5, resume=False):
+        sim, stages = couplet.build(dict(couplet.PARAMS, h5=h5, increments=8, nx=2, ny=1, nz=1))
+        sim.options.max_dissipation = 0.05      # cuts the increments around the peak
+        sim.options.checkpoint_s = 0.0
+        if resume:
+            sim.resume(h5)
+        hist = sim.run(stages)
+        sim.close()
+        return hist
+
+    whole = run(str(tmp_path / "whole.h5"))
+    assert whole["cut_iterations"][1] > 0       # row 2 is the first part of a cut increment
+    path = couplet.PARAMS["u_max"] * (np.arange(9) / 8) ** 3
+    assert path[1] < whole["platen.uz"][1] < whole["platen.uz"][2] < path[2]
+    h5 = str(tmp_path / "cut.h5")
+    commit = Simulation._commit
+
+    def stop(self, *args):
+        commit(self, *args)
+        if self.increment == 3:
+            raise KeyboardInterrupt
+    monkeypatch.setattr(Simulation, "_commit", stop)
+    with pytest.raises(KeyboardInterrupt):
+        run(h5)
+    monkeypatch.setattr(Simulation, "_commit", commit)
+    assert open_result(h5).checkpoint()[0] == 2
+    hist = run(h5, resume=True)
+    assert np.array_equal(hist["increment"], np.arange(1, hist["increment"].size + 1))
+    assert np.allclose(hist["platen.uz"][:2], whole["platen.uz"][:2], rtol=1e-12)
+    assert hist["platen.uz"][-1] == pytest.approx(couplet.PARAMS["u_max"], rel=1e-12)
+    assert hist["platen.fz"].max() == pytest.approx(whole["platen.fz"].max(), rel=0.01)
+
+
 def test_non_finite_state_is_caught(tmp_path):
     """A NaN in the displacement field stops the run with the node and block named."""
     sim, stages = couplet.build(dict(couplet.PARAMS, h5=None))
