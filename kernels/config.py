@@ -2,7 +2,7 @@
 
 Caching: a kernel that calls kernels of other files carries their compiled code in its own cache
 entry, and Numba checks only the caller's file. The kernels' entries are therefore stamped with a
-hash of every file of this package (:class:`_KernelsLocator`): editing any kernel recompiles all
+hash of every file of this package (:class:`_Stamped`): editing any kernel recompiles all
 of them instead of running stale code.
 """
 import glob
@@ -29,8 +29,8 @@ def _sources_stamp():
     return sha.hexdigest()
 
 
-class _KernelsLocator(caching.InTreeCacheLocator):
-    """Numba's in-tree cache for this package's files, stamped with all their sources."""
+class _Stamped:
+    """Cache locator mixin: this package's files only, stamped with all their sources."""
 
     _stamp = _sources_stamp()
 
@@ -44,8 +44,17 @@ class _KernelsLocator(caching.InTreeCacheLocator):
         return super().from_function(py_func, py_file)
 
 
-if _KernelsLocator not in caching.CacheImpl._locator_classes:
-    caching.CacheImpl._locator_classes.insert(0, _KernelsLocator)
+class _KernelsUserDirLocator(_Stamped, caching.UserProvidedCacheLocator):
+    """``NUMBA_CACHE_DIR`` when it is set."""
+
+
+class _KernelsLocator(_Stamped, caching.InTreeCacheLocator):
+    """Otherwise Numba's in-tree cache (``__pycache__`` next to the kernels)."""
+
+
+for _loc in (_KernelsLocator, _KernelsUserDirLocator):
+    if _loc not in caching.CacheImpl._locator_classes:
+        caching.CacheImpl._locator_classes.insert(0, _loc)
 
 jit = numba.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
 pjit = numba.njit(cache=True, fastmath=FASTMATH, error_model="numpy", parallel=True)

@@ -47,5 +47,5 @@ def test_editing_a_callee_recompiles_its_cached_caller(tmp_path):
 def test_kernels_use_the_package_stamp():
     from dr_masonry.kernels import relaxation
     locator = relaxation.relax._cache._impl.locator
-    assert isinstance(locator, config._KernelsLocator)
+    assert isinstance(locator, config._Stamped)
     assert locator.get_source_stamp() == config._sources_stamp()
