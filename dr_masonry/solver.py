@@ -68,8 +68,10 @@ class SolverOptions:
         (``R.STALL_DROP``) for this many iterations is cut in two before ``max_iter`` (0: never).
         At a mechanism's onset the relaxation can hover just above ``tol`` for the whole cap
         while the two halves converge in a few thousand iterations each (BENCHMARKS.md, section
-        10); a relaxation that converges slowly but steadily is left alone (section 13); at the
-        last allowed cut the increment runs to ``max_iter``
+        10); a relaxation that converges steadily is left alone (section 13) unless, at its rate
+        of the last ``stall_iter`` iterations, it would not reach ``tol`` within ``max_iter``
+        (then it is cut at once, section 15); at the last allowed cut the increment runs to
+        ``max_iter``
     max_dissipation : load-step control, off by default (0): a converged increment whose damage
         dissipation (blocks, and joints without friction) exceeds this fraction of the external
         work done so far is cut in two (accepted at the last allowed cut). Where many joints
@@ -649,7 +651,7 @@ class Simulation:
         too_much = (energies is not None and o.max_dissipation > 0 and depth < o.max_cuts
                     and energies.ratio > o.max_dissipation
                     and not (parent_diss is not None and energies.diss >= JUMP * parent_diss))
-        if status in (R.ST_MAXITER, R.ST_STALLED) or too_much:
+        if status in (R.ST_MAXITER, R.ST_STALLED, R.ST_SLOW) or too_much:
             self._restore(snap)
             self._cut_work[0] += int(info[R.I_ITERS])
             self._cut_work[1] += elapsed
@@ -681,6 +683,7 @@ class Simulation:
         o, d = self.options, self.dyn
         args = (DAMPING[o.damping], o.alpha, tol, self.ref_floor)
         if not self.use_coarse:
+            info[R.I_LEFT] = max_iter
             R.relax(self.mesh, self.cont, d, self.lam, ctrl, pc, *args, max_iter, o.check_every,
                     stall, 0.5 * self.size, info)
             return
@@ -709,6 +712,7 @@ class Simulation:
             else:
                 every = min(2 * every, 64 * o.coarse_every)
             span = min(every, max_iter - done)
+            info[R.I_LEFT] = max_iter - done
             R.relax(self.mesh, self.cont, d, self.lam, ctrl, pc, *args, span, o.check_every,
                     stall, 0.5 * self.size, info)
             done += int(info[R.I_ITERS])

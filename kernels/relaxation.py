@@ -49,6 +49,7 @@ ST_NONFINITE = 2
 ST_RUNAWAY = 3
 ST_UNSTABLE = 4  # viscous damping: the motion's Rayleigh quotient stays above the stable limit
 ST_STALLED = 5   # the residual ratio did not fall below STALL_DROP x its best in stall_iter iterations
+ST_SLOW = 6      # at its rate of the last stall_iter iterations, tol is out of the increment's budget
 
 #: (omega dt)^2 of the central-difference stability limit, with a 5 % margin for the geometric
 #: stiffness that the Gershgorin masses do not bound
@@ -74,7 +75,11 @@ I_EINT = 8       # stored energy (hexahedra + joints), J
 I_OVER = 9       # unstable-step count (read and written: it carries over the calls of an increment)
 I_GOAL = 10      # residual ratio that counts as progress (read and written; <= 0: none yet)
 I_SINCE = 11     # iterations since the last progress (read and written)
-N_INFO = 12
+I_LEFT = 12      # iterations left in the increment's budget at the call (set by the caller; 0: unknown)
+I_BEST = 13      # best residual ratio of the increment so far (read and written)
+I_WIN_R = 14     # best residual ratio at the start of the current rate window (read and written)
+I_WIN_N = 15     # iterations into the rate window (read and written)
+N_INFO = 16
 
 
 @jit
@@ -217,7 +222,11 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, tol, ref_floor
         its best value for this many iterations (a relaxation that hovers above ``tol``, e.g.
         joints chattering at a mechanism's onset; the solver cuts the increment); 0: never.
         The progress marks ``info[I_GOAL]``, ``info[I_SINCE]`` carry over the calls of an
-        increment.
+        increment. Every ``stall_iter`` iterations the best residual ratio's rate of decrease
+        over that window also predicts the iterations still needed to reach ``tol``; more than
+        the increment's budget ``info[I_LEFT]`` minus the iterations of this call (an attempt
+        converging steadily but too slowly to finish) stops with ST_SLOW. ``info[I_LEFT]`` = 0:
+        no budget known, no such test.
     u_limit : float
         run-away guard: any displacement above it (m) stops the loop.
     info : (N_INFO,) float64 written.
@@ -245,6 +254,10 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, tol, ref_floor
     n_over = info[I_OVER]
     goal = info[I_GOAL]
     since = info[I_SINCE]
+    left = info[I_LEFT]
+    best = info[I_BEST]
+    win_r = info[I_WIN_R]
+    win_n = info[I_WIN_N]
     last_check = 0
     place_rigid_nodes(dyn)
     for it in range(1, max_iter + 1):
@@ -279,11 +292,25 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, tol, ref_floor
                 since = 0.0
             else:
                 since += it - last_check
+            if ratio < best or best <= 0.0:
+                best = ratio
+            if win_r <= 0.0:
+                win_r = best
+            win_n += it - last_check
             last_check = it
             if stall_iter > 0 and since >= stall_iter:
                 status = ST_STALLED
                 qty = ratio
                 break
+            if stall_iter > 0 and win_n >= stall_iter:
+                # iterations to tol at the window's rate of decrease of the best ratio
+                if left > 0.0 and (best >= win_r or np.log(best / tol) * win_n
+                                   > np.log(win_r / best) * (left - it)):
+                    status = ST_SLOW
+                    qty = ratio
+                    break
+                win_r = best
+                win_n = 0.0
         # ---- velocity update ----------------------------------------------------------
         c_visc = 0.0
         if scheme == DAMP_VISCOUS:
@@ -447,6 +474,9 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, tol, ref_floor
     info[I_DAMPED] = damped
     info[I_GOAL] = goal
     info[I_SINCE] = since
+    info[I_BEST] = best
+    info[I_WIN_R] = win_r
+    info[I_WIN_N] = win_n
     info[I_WORST] = worst
     info[I_QTY] = qty
     info[I_REF] = ref

@@ -186,3 +186,26 @@ def test_stall_rule_does_not_touch_a_converging_relaxation():
         runs.append((int(info[R.I_ITERS]), sim.dyn.rpU.copy()))
     assert runs[0][0] == runs[1][0] > 200
     np.testing.assert_array_equal(runs[0][1], runs[1][1])
+
+
+def test_slow_rule_cuts_what_cannot_finish_within_the_budget():
+    """The loaded column converges steadily to 1e-8 in N iterations. Windows of N/4 iterations:
+    with a budget of N/2 the rate of the first window puts tol out of reach and the loop stops
+    with ST_SLOW at that window's end; with a budget of 2 N, or none known (``I_LEFT`` = 0), the
+    rule only observes: the same iterations and displacements as without it."""
+    def run(stall, left):
+        sim, _ = _loaded_column()
+        info = np.zeros(R.N_INFO)
+        info[R.I_LEFT] = left
+        _relax(sim, R.DAMP_VISCOUS, 1.0, 1e-8, 100_000, stall, info)
+        return int(info[R.I_STATUS]), int(info[R.I_ITERS]), sim.dyn.rpU.copy()
+
+    status, n, u = run(0, 0)
+    assert status == R.ST_CONVERGED and n > 400
+    window = 10 * (n // 40)
+    for left in (2 * n, 0):
+        s, m, v = run(window, left)
+        assert (s, m) == (R.ST_CONVERGED, n)
+        np.testing.assert_array_equal(v, u)
+    s, m, _ = run(window, n // 2)
+    assert s == R.ST_SLOW and window <= m <= window + 10
