@@ -25,7 +25,7 @@ fbuf, psi, ptr, rows); ``dyn``: nodal and reference-point state (the ``Dyn`` nam
 import numpy as np
 
 from .assembly import gather_add
-from .config import jit
+from .config import ijit, jit
 from .contact_forces import contact_forces
 from .hex8 import hex_forces
 
@@ -49,7 +49,7 @@ ST_NONFINITE = 2
 ST_RUNAWAY = 3
 ST_UNSTABLE = 4  # viscous damping: the motion's Rayleigh quotient stays above the stable limit
 ST_STALLED = 5   # the residual ratio did not fall below STALL_DROP x its best in stall_iter iterations
-ST_SLOW = 6      # at its rate of the last stall_iter iterations, tol is out of the increment's budget
+ST_SLOW = 6      # the decrease of the residual, extrapolated, does not reach tol within the budget
 
 #: (omega dt)^2 of the central-difference stability limit, with a 5 % margin for the geometric
 #: stiffness that the Gershgorin masses do not bound
@@ -79,7 +79,9 @@ I_LEFT = 12      # iterations left in the increment's budget at the call (set by
 I_BEST = 13      # best residual ratio of the increment so far (read and written)
 I_WIN_R = 14     # best residual ratio at the start of the current rate window (read and written)
 I_WIN_N = 15     # iterations into the rate window (read and written)
-N_INFO = 16
+I_WIN_D = 16     # decrease of log(best ratio) over the last complete window (read and written)
+I_WIN_K = 17     # complete rate windows so far (read and written)
+N_INFO = 18
 
 
 @jit
@@ -190,6 +192,18 @@ def norms(dyn, lam, rpres):
     return np.sqrt(rf), np.sqrt(ref)
 
 
+@ijit
+def reachable_decrease(d, d_prev, windows):
+    """Decrease of log(residual ratio) still reachable in ``windows`` (>= 0) rate windows after
+    two that decreased it by ``d_prev`` and then ``d`` (>= 0; ``d_prev`` 0: unknown): a geometric
+    series of ratio q = d / d_prev when the decrease shrinks (a relaxation approaching a floor
+    above tol, BENCHMARKS.md section 15), else ``d`` per window."""
+    if d_prev > d > 0.0:
+        q = d / d_prev
+        return d * q * (1.0 - q ** windows) / (1.0 - q)
+    return d * windows
+
+
 @jit
 def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, tol, ref_floor, max_iter,
           check_every, stall_iter, u_limit, info):
@@ -222,11 +236,12 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, tol, ref_floor
         its best value for this many iterations (a relaxation that hovers above ``tol``, e.g.
         joints chattering at a mechanism's onset; the solver cuts the increment); 0: never.
         The progress marks ``info[I_GOAL]``, ``info[I_SINCE]`` carry over the calls of an
-        increment. Every ``stall_iter`` iterations the best residual ratio's rate of decrease
-        over that window also predicts the iterations still needed to reach ``tol``; more than
-        the increment's budget ``info[I_LEFT]`` minus the iterations of this call (an attempt
-        converging steadily but too slowly to finish) stops with ST_SLOW. ``info[I_LEFT]`` = 0:
-        no budget known, no such test.
+        increment. Every ``stall_iter`` iterations the decrease of the best residual ratio over
+        that window is also extrapolated over the windows left of the increment's budget
+        (``info[I_LEFT]`` minus the iterations of this call; :func:`reachable_decrease`): an
+        attempt that cannot reach ``tol`` in them (converging steadily but too slowly, or
+        towards a floor above tol) stops with ST_SLOW. ``info[I_LEFT]`` = 0: no budget known,
+        no such test.
     u_limit : float
         run-away guard: any displacement above it (m) stops the loop.
     info : (N_INFO,) float64 written.
@@ -260,6 +275,8 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, tol, ref_floor
     win_n = info[I_WIN_N]
     last_check = 0
     place_rigid_nodes(dyn)
+    win_d = info[I_WIN_D]
+    win_k = info[I_WIN_K]
     for it in range(1, max_iter + 1):
         eint = internal_forces(mesh, cont, dyn)
         residual(dyn, lam, rpres)
@@ -303,14 +320,18 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, tol, ref_floor
                 qty = ratio
                 break
             if stall_iter > 0 and win_n >= stall_iter:
-                # iterations to tol at the window's rate of decrease of the best ratio
-                if left > 0.0 and (best >= win_r or np.log(best / tol) * win_n
-                                   > np.log(win_r / best) * (left - it)):
+                # can the windows left of the budget bring the best ratio down to tol?
+                d = np.log(win_r / best) if best < win_r else 0.0
+                d_prev = win_d if win_k >= 2.0 else 0.0   # the first window holds the transient
+                if left > 0.0 and (reachable_decrease(d, d_prev, (left - it) / win_n)
+                                   < np.log(best / tol)):
                     status = ST_SLOW
                     qty = ratio
                     break
                 win_r = best
                 win_n = 0.0
+                win_d = d
+                win_k += 1.0
         # ---- velocity update ----------------------------------------------------------
         c_visc = 0.0
         if scheme == DAMP_VISCOUS:
@@ -477,6 +498,8 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, tol, ref_floor
     info[I_BEST] = best
     info[I_WIN_R] = win_r
     info[I_WIN_N] = win_n
+    info[I_WIN_D] = win_d
+    info[I_WIN_K] = win_k
     info[I_WORST] = worst
     info[I_QTY] = qty
     info[I_REF] = ref

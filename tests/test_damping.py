@@ -209,3 +209,24 @@ def test_slow_rule_cuts_what_cannot_finish_within_the_budget():
         np.testing.assert_array_equal(v, u)
     s, m, _ = run(window, n // 2)
     assert s == R.ST_SLOW and window <= m <= window + 10
+
+
+def test_reachable_decrease_extrapolates_a_shrinking_rate():
+    """Hand sums: a decrease that halves per window reaches 0.25 + 0.125 + 0.0625 in 3 more
+    windows after 1.0 then 0.5; a steady or growing one (or an unknown previous window) reaches
+    ``d`` per window. On the S6 attempt that hovered above tol (BENCHMARKS.md section 15: best
+    residual ratio at the ends of 10,000-iteration windows, 200,000-iteration budget) the
+    extrapolation keeps the windows ending at 21,400 and 31,400 iterations and gives up at
+    41,400, where 158,600 iterations cannot bring 1.148e-3 down to tol 1e-4."""
+    assert R.reachable_decrease(0.5, 1.0, 3.0) == pytest.approx(0.4375, rel=1e-12)
+    for d_prev in (0.0, 0.5, 0.4):
+        assert R.reachable_decrease(0.5, d_prev, 3.0) == pytest.approx(1.5, rel=1e-12)
+    best = {11_400: 4.444e-3, 21_400: 2.711e-3, 31_400: 1.699e-3, 41_400: 1.148e-3}
+    ends = sorted(best)
+    verdicts = []
+    for k in range(1, len(ends)):
+        d = np.log(best[ends[k - 1]] / best[ends[k]])
+        d_prev = np.log(best[ends[k - 2]] / best[ends[k - 1]]) if k >= 2 else 0.0
+        left = (200_000 - ends[k]) / 10_000
+        verdicts.append(R.reachable_decrease(d, d_prev, left) < np.log(best[ends[k]] / 1e-4))
+    assert verdicts == [False, False, True]
