@@ -656,9 +656,12 @@ class Simulation:
             self._cut_work[0] += int(info[R.I_ITERS])
             self._cut_work[1] += elapsed
             if depth >= o.max_cuts:
-                hint = ("; the out-of-balance force exceeds the loads: an unstable step (safety "
-                        f"factor {o.safety}) or a structure that lost equilibrium"
-                        if info[R.I_RESID] >= 1.0 else "")
+                if info[R.I_RESID] >= 1.0:
+                    hint = ("; the out-of-balance force exceeds the loads: an unstable step (safety "
+                            f"factor {o.safety}) or a structure that lost equilibrium")
+                else:
+                    hint = ("; to go on, continue from the last checkpoint (scenes: resume=true) "
+                            "with a looser tol, a larger max_iter or more max_cuts")
                 self._fail(f"increment {self.increment + 1} of stage {stage.name!r} did not converge "
                            f"in {max_iter} iterations after {depth} cuts (residual ratio "
                            f"{info[R.I_RESID]:.2e} > tol {tol:.1e}){hint}")
