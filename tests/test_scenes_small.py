@@ -6,6 +6,7 @@ from dr_masonry import JointLaw, PlasticDamage, SolverOptions
 from dr_masonry.cases import couplet, triplet, wallet
 from dr_masonry.loading import LoadingError
 from dr_masonry.solver import SolverError
+from interrupt import interrupt_after
 
 
 def test_couplet_peak_and_energy(tmp_path):
@@ -183,12 +184,7 @@ def test_checkpoint_inside_a_cut_increment(tmp_path, monkeypatch):
     assert path[1] < whole["platen.uz"][1] < whole["platen.uz"][2] < path[2]
     h5 = str(tmp_path / "cut.h5")
     commit = Simulation._commit
-
-    def stop(self, *args):
-        commit(self, *args)
-        if self.increment == 3:
-            raise KeyboardInterrupt
-    monkeypatch.setattr(Simulation, "_commit", stop)
+    interrupt_after(monkeypatch, 3)
     with pytest.raises(KeyboardInterrupt):
         run(h5)
     monkeypatch.setattr(Simulation, "_commit", commit)

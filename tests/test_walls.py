@@ -13,6 +13,7 @@ from dr_masonry.loading import LoadingError
 from dr_masonry.params import ParameterError
 from dr_masonry.postprocess import PostprocessError, cycle_bounds, energy_per_cycle
 from dr_masonry.protocols import PROTOCOLS, S4, S5
+from interrupt import interrupt_after
 
 L, T, NC, HC = 0.88, 0.102, 10, 0.081
 H = NC * HC
@@ -187,18 +188,6 @@ def test_main_writes_outputs(tmp_path):
         assert (tmp_path / ("s5" + suffix)).exists()
     assert (tmp_path / "s5_vtk").is_dir()
     assert math.isfinite(np.loadtxt(str(out) + ".csv", delimiter=",", skiprows=1)[-1, 0])
-
-
-def interrupt_after(monkeypatch, increment):
-    """Make runs raise KeyboardInterrupt once ``increment`` has been committed (an interrupt)."""
-    from dr_masonry.solver import Simulation
-    commit = Simulation._commit
-
-    def stop(self, *args):
-        commit(self, *args)
-        if self.increment == increment:
-            raise KeyboardInterrupt
-    monkeypatch.setattr(Simulation, "_commit", stop)
 
 
 def test_interrupted_run_resumes(tmp_path, monkeypatch, squat):
