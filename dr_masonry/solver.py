@@ -570,8 +570,7 @@ class Simulation:
             self.stage_position = (where[0], i + 1, start_values, where[1], n)
             if (i + 1) % stage.frames == 0 or i == n - 1:
                 self._write_frame()
-            elif (self.writer is not None and
-                  time.perf_counter() - self._checkpoint_time >= self.options.checkpoint_s):
+            elif self._checkpoint_due():
                 self._write_checkpoint()
             if self._bar is not None:
                 self._bar.update(1)
@@ -673,8 +672,7 @@ class Simulation:
         self.du_prev = (d.U - u_before) * d.free
         self.dctl_prev = dctl
         self._commit(info, elapsed, energies)
-        if (depth > 0 and self.writer is not None
-                and time.perf_counter() - self._checkpoint_time >= o.checkpoint_s):
+        if depth > 0 and self._checkpoint_due():
             self._write_checkpoint()   # a part of a cut increment (hard increments take hours)
 
     def _relax(self, ctrl, pc, tol, max_iter, stall, info):
@@ -892,6 +890,12 @@ class Simulation:
 
     # ------------------------------------------------------------------ restart
     _STATE = ("U", "V", "free", "rpU", "rpV", "rpfree")
+
+    def _checkpoint_due(self):
+        """True when a result file is written and ``options.checkpoint_s`` have passed since the
+        last checkpoint."""
+        return (self.writer is not None
+                and time.perf_counter() - self._checkpoint_time >= self.options.checkpoint_s)
 
     def _write_checkpoint(self):
         """Store everything a continued run needs (overwritten at every frame and every

@@ -273,10 +273,10 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, tol, ref_floor
     best = info[I_BEST]
     win_r = info[I_WIN_R]
     win_n = info[I_WIN_N]
-    last_check = 0
-    place_rigid_nodes(dyn)
     win_d = info[I_WIN_D]
     win_k = info[I_WIN_K]
+    last_check = 0
+    place_rigid_nodes(dyn)
     for it in range(1, max_iter + 1):
         eint = internal_forces(mesh, cont, dyn)
         residual(dyn, lam, rpres)
