@@ -89,9 +89,8 @@ def hex_args(sim, U, elastic):
 
 def contact_args(sim, U):
     c = sim.cont
-    x = sim.dyn.X + U
-    return (x, c.slave, c.master, c.xi, c.area, c.law, c.lparams, c.gap0, c.s_old, c.s_new,
-            c.gaps, c.trac, c.fbuf, c.psi)
+    return (sim.dyn.X, np.ascontiguousarray(U), c.slave, c.master, c.xi, c.area, c.law,
+            c.lparams, c.gap0, c.s_old, c.s_new, c.gaps, c.trac, c.fbuf, c.psi)
 
 
 def gravity(sim):
@@ -152,7 +151,7 @@ def steady(params):
             from dr_masonry.kernels.joint_law import JS_D
             args = contact_args(sim, displacement(sim, 0.0, jump, seed=1))
             contact_forces(*args)
-            frac = float(np.mean(args[9][:, JS_D] > 0))
+            frac = float(np.mean(args[10][:, JS_D] > 0))
             cases.append((label, contact_forces, args, nc, "contact-step", frac))
         rargs = gravity(sim)
         rargs[10] = params["relax_iters"]

@@ -6,7 +6,7 @@ Every node is written by exactly one thread, so the result is deterministic.
 """
 import numpy as np
 
-from .config import pjit, prange
+from .config import ijit, pjit, prange
 
 
 def node_row_map(items, n_nodes):
@@ -32,18 +32,37 @@ def node_row_map(items, n_nodes):
     return ptr, order.astype(np.int64)
 
 
+@ijit
+def _rows_sum(buf, ptr, rows, i):
+    """Sum of the rows of ``buf`` (m, 3) that belong to node i (see :func:`node_row_map`)."""
+    a0 = 0.0
+    a1 = 0.0
+    a2 = 0.0
+    for q in range(ptr[i], ptr[i + 1]):
+        r = rows[q]
+        a0 += buf[r, 0]
+        a1 += buf[r, 1]
+        a2 += buf[r, 2]
+    return a0, a1, a2
+
+
 @pjit
 def gather_add(buf, ptr, rows, out):
     """``out[i] += sum(buf[rows[ptr[i]:ptr[i+1]]])`` for every node i; buf (m, 3), out (n, 3)."""
     for i in prange(out.shape[0]):
-        a0 = 0.0
-        a1 = 0.0
-        a2 = 0.0
-        for q in range(ptr[i], ptr[i + 1]):
-            r = rows[q]
-            a0 += buf[r, 0]
-            a1 += buf[r, 1]
-            a2 += buf[r, 2]
+        a0, a1, a2 = _rows_sum(buf, ptr, rows, i)
         out[i, 0] += a0
         out[i, 1] += a1
         out[i, 2] += a2
+
+
+@pjit
+def gather_pair(buf_a, ptr_a, rows_a, buf_b, ptr_b, rows_b, out):
+    """``out[i] = (node i's rows of buf_a) + (its rows of buf_b)`` in one pass (two maps of
+    :func:`node_row_map`, e.g. hexahedra and contact points); out (n, 3) overwritten."""
+    for i in prange(out.shape[0]):
+        a0, a1, a2 = _rows_sum(buf_a, ptr_a, rows_a, i)
+        b0, b1, b2 = _rows_sum(buf_b, ptr_b, rows_b, i)
+        out[i, 0] = a0 + b0
+        out[i, 1] = a1 + b1
+        out[i, 2] = a2 + b2

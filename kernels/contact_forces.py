@@ -10,7 +10,7 @@ from .config import ijit, pjit, prange
 from .contact_frame import contact_frame
 from .joint_law import JS_D, JS_DP1, JS_DP2, P_KC, P_KNN, P_KSS, joint_point
 
-_CHUNK = 64  # contact points per parallel task (scratch arrays are allocated once per task)
+CHUNK = 64  #: contact points per parallel task (scratch arrays allocated once per task)
 
 
 @ijit
@@ -31,12 +31,13 @@ def joint_energy(p, gap, s):
 
 
 @pjit
-def contact_forces(x, slave, master, xi, area, law, lparams, gap0, s_old, s_new, gaps, trac,
+def contact_forces(X, U, slave, master, xi, area, law, lparams, gap0, s_old, s_new, gaps, trac,
                    fbuf, psi):
-    """Evaluate every contact point at current coordinates ``x`` (n_nodes, 3), m.
+    """Evaluate every contact point at current coordinates ``X + U`` (n_nodes, 3), m.
 
     Parameters
     ----------
+    X, U : (n_nodes, 3) reference coordinates and displacements, m.
     slave (nc,), master (nc, 4), xi (nc, 2), area (nc,) m^2, law (nc,), lparams (n_laws, NJP),
     gap0 (nc, 3) m : the contact set (docs/internals.md).
     s_old, s_new : (nc, NJS) committed and updated joint histories.
@@ -45,48 +46,49 @@ def contact_forces(x, slave, master, xi, area, law, lparams, gap0, s_old, s_new,
     psi : (nc,) written: stored energy of each point, J.
     """
     nc = slave.shape[0]
-    nchunk = (nc + _CHUNK - 1) // _CHUNK
-    for ch in prange(nchunk):
-        xq = np.empty((4, 3))  # scratch, once per chunk of points
-        xm = np.empty(3)
-        frame = np.empty((3, 3))
-        g = np.empty(3)
-        t = np.empty(3)
-        for c in range(ch * _CHUNK, min(nc, (ch + 1) * _CHUNK)):
-            _one_contact(c, x, slave, master, xi, area, law, lparams, gap0, s_old, s_new, gaps,
-                         trac, fbuf, psi, xq, xm, frame, g, t)
+    for ch in prange((nc + CHUNK - 1) // CHUNK):
+        contact_chunk(ch * CHUNK, min(nc, (ch + 1) * CHUNK), X, U, slave, master, xi, area, law,
+                      lparams, gap0, s_old, s_new, gaps, trac, fbuf, psi)
 
 
 @ijit
-def _one_contact(c, x, slave, master, xi, area, law, lparams, gap0, s_old, s_new, gaps, trac,
-                 fbuf, psi, xq, xm, frame, g, t):
-    """Contact point ``c`` of :func:`contact_forces`, with caller-provided scratch arrays."""
-    for a in range(4):
+def contact_chunk(lo, hi, X, U, slave, master, xi, area, law, lparams, gap0, s_old, s_new, gaps,
+                  trac, fbuf, psi):
+    """Points ``lo:hi`` of :func:`contact_forces` (one parallel task, its own scratch)."""
+    xq = np.empty((4, 3))
+    xm = np.empty(3)
+    frame = np.empty((3, 3))
+    xs = np.empty(3)
+    t = np.empty(3)
+    for c in range(lo, hi):
+        for a in range(4):
+            for k in range(3):
+                xq[a, k] = X[master[c, a], k] + U[master[c, a], k]
         for k in range(3):
-            xq[a, k] = x[master[c, a], k]
-    r = xi[c, 0]
-    s = xi[c, 1]
-    contact_frame(xq, r, s, xm, frame)
-    for a in range(3):
-        g[a] = ((x[slave[c], 0] - xm[0]) * frame[a, 0] + (x[slave[c], 1] - xm[1]) * frame[a, 1]
-                + (x[slave[c], 2] - xm[2]) * frame[a, 2]) - gap0[c, a]
-        gaps[c, a] = g[a]
-    p = lparams[law[c]]
-    joint_point(p, g[0], g[1], g[2], s_old[c], s_new[c], t)
-    for a in range(3):
-        trac[c, a] = t[a]
-    psi[c] = area[c] * joint_energy(p, g, s_new[c])
-    n0 = 0.25 * (1.0 - r) * (1.0 - s)
-    n1 = 0.25 * (1.0 + r) * (1.0 - s)
-    n2 = 0.25 * (1.0 + r) * (1.0 + s)
-    n3 = 0.25 * (1.0 - r) * (1.0 + s)
-    for k in range(3):
-        f = area[c] * (t[0] * frame[0, k] + t[1] * frame[1, k] + t[2] * frame[2, k])
-        fbuf[5 * c, k] = f
-        fbuf[5 * c + 1, k] = -n0 * f
-        fbuf[5 * c + 2, k] = -n1 * f
-        fbuf[5 * c + 3, k] = -n2 * f
-        fbuf[5 * c + 4, k] = -n3 * f
+            xs[k] = X[slave[c], k] + U[slave[c], k]
+        r = xi[c, 0]
+        s = xi[c, 1]
+        contact_frame(xq, r, s, xm, frame)
+        for a in range(3):
+            ga = ((xs[0] - xm[0]) * frame[a, 0] + (xs[1] - xm[1]) * frame[a, 1]
+                  + (xs[2] - xm[2]) * frame[a, 2]) - gap0[c, a]
+            gaps[c, a] = ga
+        p = lparams[law[c]]
+        joint_point(p, gaps[c, 0], gaps[c, 1], gaps[c, 2], s_old[c], s_new[c], t)
+        for a in range(3):
+            trac[c, a] = t[a]
+        psi[c] = area[c] * joint_energy(p, gaps[c], s_new[c])
+        n0 = 0.25 * (1.0 - r) * (1.0 - s)
+        n1 = 0.25 * (1.0 + r) * (1.0 - s)
+        n2 = 0.25 * (1.0 + r) * (1.0 + s)
+        n3 = 0.25 * (1.0 - r) * (1.0 + s)
+        for k in range(3):
+            f = area[c] * (t[0] * frame[0, k] + t[1] * frame[1, k] + t[2] * frame[2, k])
+            fbuf[5 * c, k] = f
+            fbuf[5 * c + 1, k] = -n0 * f
+            fbuf[5 * c + 2, k] = -n1 * f
+            fbuf[5 * c + 3, k] = -n2 * f
+            fbuf[5 * c + 4, k] = -n3 * f
 
 
 def contact_rowsum(slave, master, xi, area, kbound, n_nodes):

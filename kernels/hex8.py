@@ -30,7 +30,7 @@ GAUSS = CORNERS / np.sqrt(3.0)
 #: shape functions at the Gauss points (8 gauss points, 8 nodes)
 N_GAUSS = 0.125 * np.prod(1.0 + GAUSS[:, None, :] * CORNERS[None, :, :], axis=2)
 
-_CHUNK = 64  # elements per parallel work item (local scratch arrays allocated once per item)
+CHUNK = 64  #: elements per parallel task (scratch arrays allocated once per task)
 SHARE_RTOL = 1e-9  #: corner offsets equal to this fraction of the smallest element share a table
 
 
@@ -286,41 +286,48 @@ def hex_forces(U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old, s_new
         material with ``p[MP_ELASTIC] == 1``).
     """
     na = active.shape[0]
-    nchunk = (na + _CHUNK - 1) // _CHUNK
-    for c in prange(nchunk):
-        ue = np.empty((8, 3))
-        F = np.empty((3, 3))
-        eps = np.empty(6)
-        sig = np.empty(6)
-        for k in range(c * _CHUNK, min(na, (c + 1) * _CHUNK)):
-            e = active[k]
-            fe = f_elem[e]
-            for a in range(8):
-                n = conn[e, a]
-                for i in range(3):
-                    ue[a, i] = U[n, i]
-                    fe[a, i] = 0.0
-            p = params[elem_mat[e]]
-            plastic = p[MP_ELASTIC] != 1.0
-            dne = dN[geo[e]]
-            en = 0.0
-            for g in range(8):
-                dng = dne[g]
-                hex_gauss_strain(ue, dng, F, eps)
-                w = wdet[e, g]
-                acc = 0.0
-                if plastic:
-                    sn = s_new[e, g]
-                    gp_update(p, h[e], eps, s_old[e, g], sn, sig)
-                    for m in range(6):
-                        acc += sig[m] * (eps[m] - sn[MS_EPSP + m])
-                else:
-                    elastic_stress(p, eps, sig)
-                    for m in range(6):
-                        acc += sig[m] * eps[m]
-                hex_add_gauss_force(F, sig, dng, w, fe)
-                en += 0.5 * w * acc
-            energy[e] = en
+    for c in prange((na + CHUNK - 1) // CHUNK):
+        hex_chunk(c * CHUNK, min(na, (c + 1) * CHUNK), U, conn, active, dN, geo, wdet, h,
+                  elem_mat, params, s_old, s_new, f_elem, energy)
+
+
+@ijit
+def hex_chunk(lo, hi, U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old, s_new, f_elem,
+              energy):
+    """Elements ``active[lo:hi]`` of :func:`hex_forces` (one parallel task, its own scratch)."""
+    ue = np.empty((8, 3))
+    F = np.empty((3, 3))
+    eps = np.empty(6)
+    sig = np.empty(6)
+    for k in range(lo, hi):
+        e = active[k]
+        fe = f_elem[e]
+        for a in range(8):
+            n = conn[e, a]
+            for i in range(3):
+                ue[a, i] = U[n, i]
+                fe[a, i] = 0.0
+        p = params[elem_mat[e]]
+        plastic = p[MP_ELASTIC] != 1.0
+        dne = dN[geo[e]]
+        en = 0.0
+        for g in range(8):
+            dng = dne[g]
+            hex_gauss_strain(ue, dng, F, eps)
+            w = wdet[e, g]
+            acc = 0.0
+            if plastic:
+                sn = s_new[e, g]
+                gp_update(p, h[e], eps, s_old[e, g], sn, sig)
+                for m in range(6):
+                    acc += sig[m] * (eps[m] - sn[MS_EPSP + m])
+            else:
+                elastic_stress(p, eps, sig)
+                for m in range(6):
+                    acc += sig[m] * eps[m]
+            hex_add_gauss_force(F, sig, dng, w, fe)
+            en += 0.5 * w * acc
+        energy[e] = en
 
 
 # ---------------------------------------------------------------------------- mass

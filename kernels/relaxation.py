@@ -24,10 +24,12 @@ fbuf, psi, ptr, rows); ``dyn``: nodal and reference-point state (the ``Dyn`` nam
 """
 import numpy as np
 
-from .assembly import gather_add
-from .config import ijit, jit
-from .contact_forces import contact_forces
-from .hex8 import hex_forces
+from .assembly import gather_pair
+from .config import ijit, jit, pjit, prange
+from .contact_forces import CHUNK as CONTACT_CHUNK
+from .contact_forces import contact_chunk
+from .hex8 import CHUNK as HEX_CHUNK
+from .hex8 import hex_chunk
 
 DAMP_KINETIC = 0
 DAMP_VISCOUS = 1
@@ -123,24 +125,46 @@ def place_rigid_nodes(dyn):
                                - (d0 if k == 0 else (d1 if k == 1 else d2)))
 
 
+@pjit
+def element_and_contact_forces(X, U, mesh, cont):
+    """``hex_forces`` of ``mesh.active`` and ``contact_forces`` of every contact point as the
+    tasks of one parallel region (one wake-up of the threads instead of two); writes
+    ``mesh.fbuf``, ``mesh.energy`` and ``cont``'s outputs. ``X``, ``U``: (n_nodes, 3), m.
+
+    Numba splits a ``prange`` into one block per thread, so the hexahedron tasks (about 7 x a
+    contact task in the elastic range) are spread evenly over the range to balance the blocks."""
+    na = mesh.active.shape[0]
+    nc = cont.slave.shape[0]
+    nh = (na + HEX_CHUNK - 1) // HEX_CHUNK
+    nt = nh + (nc + CONTACT_CHUNK - 1) // CONTACT_CHUNK
+    for t in prange(nt):
+        j = (t + 1) * nh // nt   # hexahedron tasks among the first t + 1
+        if j > t * nh // nt:
+            hc = j - 1
+            hex_chunk(hc * HEX_CHUNK, min(na, (hc + 1) * HEX_CHUNK), U, mesh.conn, mesh.active,
+                      mesh.dN, mesh.geo, mesh.wdet, mesh.h, mesh.emat, mesh.mparams,
+                      mesh.s_old, mesh.s_new, mesh.fbuf, mesh.energy)
+        else:
+            c = t - j
+            contact_chunk(c * CONTACT_CHUNK, min(nc, (c + 1) * CONTACT_CHUNK), X, U,
+                          cont.slave, cont.master, cont.xi, cont.area, cont.law, cont.lparams,
+                          cont.gap0, cont.s_old, cont.s_new, cont.gaps, cont.trac, cont.fbuf,
+                          cont.psi)
+
+
 @jit
 def internal_forces(mesh, cont, dyn):
-    """Assemble internal forces into ``dyn.fint`` (n_nodes, 3), N; returns the stored energy, J."""
-    dyn.fint[:] = 0.0
+    """Assemble internal forces into ``dyn.fint`` (n_nodes, 3), N; returns the stored energy, J.
+
+    Two parallel regions (forces, then the gather per node): each region costs a wake-up of the
+    worker threads (about 0.1 ms with passive OpenMP waiting, BENCHMARKS.md section 16)."""
+    element_and_contact_forces(dyn.X, dyn.U, mesh, cont)
+    gather_pair(mesh.fbuf.reshape((-1, 3)), mesh.ptr, mesh.rows, cont.fbuf, cont.ptr, cont.rows,
+                dyn.fint)
     e = 0.0
-    if mesh.active.shape[0] > 0:
-        hex_forces(dyn.U, mesh.conn, mesh.active, mesh.dN, mesh.geo, mesh.wdet, mesh.h, mesh.emat,
-                   mesh.mparams, mesh.s_old, mesh.s_new, mesh.fbuf, mesh.energy)
-        gather_add(mesh.fbuf.reshape((-1, 3)), mesh.ptr, mesh.rows, dyn.fint)
-        for q in range(mesh.active.shape[0]):
-            e += mesh.energy[mesh.active[q]]
-    if cont.slave.shape[0] > 0:
-        x = dyn.X + dyn.U
-        contact_forces(x, cont.slave, cont.master, cont.xi, cont.area, cont.law, cont.lparams,
-                       cont.gap0, cont.s_old, cont.s_new, cont.gaps, cont.trac, cont.fbuf, cont.psi)
-        gather_add(cont.fbuf, cont.ptr, cont.rows, dyn.fint)
-        e += cont.psi.sum()
-    return e
+    for q in range(mesh.active.shape[0]):
+        e += mesh.energy[mesh.active[q]]
+    return e + cont.psi.sum()
 
 
 @jit
