@@ -39,6 +39,10 @@ DAMPING = {"kinetic": R.DAMP_KINETIC, "viscous": R.DAMP_VISCOUS, "local": R.DAMP
 
 #: "auto" coarse correction from this many movable blocks on (walls; not couplets and triplets)
 COARSE_MIN_BLOCKS = 30
+#: most iterations of one compiled ``relax`` call (rounded down to a multiple of check_every):
+#: Python regains control at least this often (progress bar, Ctrl-C: seconds, not the tens of
+#: minutes one long increment of S6 or S7 runs)
+CALL_ITERATIONS = 2000
 #: warn (once per run) when a joint node has slid off its master block's face by more than this
 #: fraction of the face's shortest edge: contact points are paired in the reference configuration
 OVERHANG_WARN = 0.05
@@ -183,6 +187,7 @@ class Simulation:
         # iterations and relaxation seconds of attempts cut in two since the last committed row
         self._cut_work = [0, 0.0]
         self._bar = None   # progress bar of a running ``run`` call
+        self._bar_t = 0.0  # when its text was last changed within an increment (perf_counter, s)
 
     # ------------------------------------------------------------------ set-up API
     def node_set(self, name, nodes):
@@ -680,46 +685,57 @@ class Simulation:
         ``coarse_every`` iterations (doubled after a rejected correction and after the tenth of
         an increment, up to 64 x; none after two rejections in a row), each preceded by a coarse
         correction on the blocks' affine motions (:mod:`dr_masonry.coarse`); ``stall``: the
-        kernel's ``stall_iter``. ``info`` holds the totals."""
+        kernel's ``stall_iter``. ``info`` holds the totals. A span runs as compiled calls of at
+        most ``CALL_ITERATIONS`` (the same iterates as one call: ``R.I_SEG``), between which the
+        progress bar is updated and Ctrl-C is honoured."""
         o, d = self.options, self.dyn
         args = (DAMPING[o.damping], o.alpha, tol, self.ref_floor)
-        if not self.use_coarse:
-            info[R.I_LEFT] = max_iter
-            R.relax(self.mesh, self.cont, d, self.lam, ctrl, pc, *args, max_iter, o.check_every,
-                    stall, 0.5 * self.size, info)
-            return
-        if self.coarse is None:
-            from .coarse import BlockCoarse
-            self.coarse = BlockCoarse(self)
-        rpres = np.zeros((d.rpX.shape[0], 6))
-        self.coarse.refresh()
-        done, damped, every, tries, rejected = 0, 0.0, o.coarse_every, 0, 0
+        rejected = 0 if self.use_coarse else 2
+        if self.use_coarse:
+            if self.coarse is None:
+                from .coarse import BlockCoarse
+                self.coarse = BlockCoarse(self)
+            rpres = np.zeros((d.rpX.shape[0], 6))
+            self.coarse.refresh()
+        call = max(o.check_every, CALL_ITERATIONS - CALL_ITERATIONS % o.check_every)
+        done, damped, every, tries, span_end = 0, 0.0, o.coarse_every, 0, 0
         while True:
-            if rejected < 2:
-                R.place_rigid_nodes(d)
-                R.internal_forces(self.mesh, self.cont, d)
-                R.residual(d, self.lam[0], rpres)
-                ok = self.coarse.correct(self.lam, rpres, ctrl)
-                rejected = 0 if ok else rejected + 1
-                tries += 1
-            # a rejected correction, and every one after the first ten of an increment (in
-            # softening, accepted steps may keep restarting the relaxation without finishing it),
-            # let the relaxation run twice as long before the next try; after two rejections in
-            # a row the secant model no longer helps: plain relaxation finishes the increment
-            if rejected >= 2:
-                every = max_iter
-            elif ok and tries <= 10:
-                every = o.coarse_every
-            else:
-                every = min(2 * every, 64 * o.coarse_every)
-            span = min(every, max_iter - done)
+            if done >= span_end:   # a new span, after a coarse correction while they help
+                if rejected < 2:
+                    R.place_rigid_nodes(d)
+                    R.internal_forces(self.mesh, self.cont, d)
+                    R.residual(d, self.lam[0], rpres)
+                    ok = self.coarse.correct(self.lam, rpres, ctrl)
+                    rejected = 0 if ok else rejected + 1
+                    tries += 1
+                    # a rejected correction, and every one after the first ten of an increment
+                    # (in softening, accepted steps may keep restarting the relaxation without
+                    # finishing it), let the relaxation run twice as long before the next try;
+                    # after two rejections in a row the secant model no longer helps: plain
+                    # relaxation finishes the increment
+                    if rejected >= 2:
+                        every = max_iter
+                    elif ok and tries <= 10:
+                        every = o.coarse_every
+                    else:
+                        every = min(2 * every, 64 * o.coarse_every)
+                else:
+                    every = max_iter
+                span_end = min(done + every, max_iter)
+                info[R.I_SEG] = 0
             info[R.I_LEFT] = max_iter - done
-            R.relax(self.mesh, self.cont, d, self.lam, ctrl, pc, *args, span, o.check_every,
-                    stall, 0.5 * self.size, info)
-            done += int(info[R.I_ITERS])
+            R.relax(self.mesh, self.cont, d, self.lam, ctrl, pc, *args,
+                    min(span_end - done, call), o.check_every, stall, 0.5 * self.size, info)
+            k = int(info[R.I_ITERS])
+            done += k
+            info[R.I_SEG] += k
             damped += info[R.I_DAMPED]
             if int(info[R.I_STATUS]) != R.ST_MAXITER or done >= max_iter:
                 break
+            if self._bar is not None and time.perf_counter() - self._bar_t > 1.0:
+                self._bar_t = time.perf_counter()
+                self._bar.set_postfix_str(f"{self.stage_name} row {self.increment + 1} res="
+                                          f"{info[R.I_RESID]:.1e} it={done}...")
         info[R.I_ITERS] = done
         info[R.I_DAMPED] = damped
 

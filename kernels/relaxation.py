@@ -83,7 +83,8 @@ I_WIN_R = 14     # best residual ratio at the start of the current rate window (
 I_WIN_N = 15     # iterations into the rate window (read and written)
 I_WIN_D = 16     # decrease of log(best ratio) over the last complete window (read and written)
 I_WIN_K = 17     # complete rate windows so far (read and written)
-N_INFO = 18
+I_SEG = 18       # iterations of the current span run by earlier calls (set by the caller; see relax)
+N_INFO = 19
 
 
 @jit
@@ -248,7 +249,7 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, tol, ref_floor
         DAMP_* constant; ``alpha`` its parameter (local damping coefficient, the viscous
         damping scale, or FIRE's initial mixing factor alpha_start). With viscous damping the
         Rayleigh quotient (omega dt)^2 = V.dF / V.M.V of the motion (central differences are
-        stable for (omega dt)^2 < 4) is checked every iteration but the first of a call (whose
+        stable for (omega dt)^2 < 4) is checked every iteration but the first of a span (whose
         dF holds the jump of the predictor or coarse correction): ``UNSTABLE_COUNT`` iterations
         above ``UNSTABLE_RQ`` (the count ``info[I_OVER]`` halved every ``UNSTABLE_WINDOW``
         iterations; an unstable step is held bounded by opening joints, so the quotient only
@@ -269,6 +270,13 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, tol, ref_floor
     u_limit : float
         run-away guard: any displacement above it (m) stops the loop.
     info : (N_INFO,) float64 written.
+
+    A call may continue the previous one: ``info[I_SEG]`` > 0 is the number of iterations that
+    earlier calls ran since the state was last moved from outside (the increment's predictor, a
+    coarse correction). The checks, the unstable-step window and the first-iteration exemption
+    then count on from there, so that with viscous damping a relaxation split into calls of a
+    multiple of ``check_every`` iterations is bit for bit the uninterrupted one (the solver
+    splits long spans to return to Python regularly: progress, Ctrl-C).
     """
     n = dyn.U.shape[0]
     nr = dyn.rpX.shape[0]
@@ -299,9 +307,11 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, tol, ref_floor
     win_n = info[I_WIN_N]
     win_d = info[I_WIN_D]
     win_k = info[I_WIN_K]
-    last_check = 0
+    seg = int(info[I_SEG])
+    last_check = seg
     place_rigid_nodes(dyn)
     for it in range(1, max_iter + 1):
+        its = seg + it   # iteration of the span
         eint = internal_forces(mesh, cont, dyn)
         residual(dyn, lam, rpres)
         # indirect displacement control: pattern magnitude follows the reaction of the held DOF
@@ -311,7 +321,7 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, tol, ref_floor
         elif ctrl[0] == 2:
             lam -= rpres[ctrl[1], ctrl[2]] / ctrl_pc
             residual(dyn, lam, rpres)
-        if it % check_every == 0 or it == 1:
+        if its % check_every == 0 or its == 1:
             rn, ref = norms(dyn, lam, rpres)
             if not (np.isfinite(rn) and np.isfinite(lam)):
                 status = ST_NONFINITE
@@ -324,7 +334,7 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, tol, ref_floor
                     if worst:
                         break
                 break
-            if rn <= tol * max(ref, ref_floor) and it > 1:
+            if rn <= tol * max(ref, ref_floor) and its > 1:
                 status = ST_CONVERGED
                 break
             ratio = rn / max(ref, ref_floor)
@@ -332,13 +342,13 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, tol, ref_floor
                 goal = STALL_DROP * ratio
                 since = 0.0
             else:
-                since += it - last_check
+                since += its - last_check
             if ratio < best or best <= 0.0:
                 best = ratio
             if win_r <= 0.0:
                 win_r = best
-            win_n += it - last_check
-            last_check = it
+            win_n += its - last_check
+            last_check = its
             if stall_iter > 0 and since >= stall_iter:
                 status = ST_STALLED
                 qty = ratio
@@ -372,9 +382,9 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, tol, ref_floor
             if c_visc > 1.9:
                 c_visc = 1.9
             fprev[:] = dyn.fint
-            if it > 1 and num > UNSTABLE_RQ * den > 0.0:
+            if its > 1 and num > UNSTABLE_RQ * den > 0.0:
                 n_over += 1.0
-            if it % UNSTABLE_WINDOW == 0:
+            if its % UNSTABLE_WINDOW == 0:
                 n_over *= 0.5
             if n_over >= UNSTABLE_COUNT:
                 status = ST_UNSTABLE

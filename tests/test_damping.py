@@ -174,6 +174,51 @@ def test_stall_rule_counts_iterations_without_progress():
         assert info[R.I_RESID] == pytest.approx(1.0, rel=1e-9)
 
 
+def test_relaxation_split_into_calls_is_the_same_relaxation():
+    """Calls that continue a span (``I_SEG``: the span's iterations so far) give the iterates of
+    one uninterrupted call: the same iteration count, status and displacements bit for bit, with
+    the stall and budget rules on; the convergence checks fall on the span's multiples of
+    check_every also when a call's length is not one (25)."""
+    def run(calls_of):
+        sim, _ = _loaded_column()
+        info = np.zeros(R.N_INFO)
+        done = 0
+        while True:
+            info[R.I_LEFT] = 100_000 - done
+            _relax(sim, R.DAMP_VISCOUS, 1.0, 1e-8, calls_of, 200, info)
+            done += int(info[R.I_ITERS])
+            info[R.I_SEG] += info[R.I_ITERS]
+            if int(info[R.I_STATUS]) != R.ST_MAXITER:
+                return int(info[R.I_STATUS]), done, sim.dyn.rpU.copy(), sim.dyn.U.copy()
+
+    status, n, rpu, u = run(100_000)
+    assert status == R.ST_CONVERGED and n > 500
+    for calls_of in (25, 250):
+        s, m, rpv, v = run(calls_of)
+        assert (s, m) == (status, n)
+        np.testing.assert_array_equal(rpv, rpu)
+        np.testing.assert_array_equal(v, u)
+
+
+def test_solver_splits_long_spans_without_changing_the_answer(monkeypatch):
+    """``Simulation._relax`` with compiled calls of 40 iterations instead of 2,000: the same
+    increments, iterations and displacements (plain and two-level relaxation)."""
+    import dr_masonry.solver as S
+    for coarse in (False, True):
+        runs = []
+        for call in (S.CALL_ITERATIONS, 40):
+            monkeypatch.setattr(S, "CALL_ITERATIONS", call)
+            m = _column(6)
+            sim = Simulation(m, SolverOptions(coarse=coarse))
+            X = m.nodes
+            sim.fix(np.nonzero(np.isclose(X[:, 2], 0.0))[0])
+            rp = sim.rigid_point("tip", nodes=np.nonzero(np.isclose(X[:, 2], 6 * 0.081))[0])
+            sim.run([Stage("push", 3, [Force(target=rp, dof="x", to=2e4)])])
+            runs.append((sim.history["iterations"], sim.dyn.U.copy()))
+        assert runs[0][0] == runs[1][0] and sum(runs[0][0]) > 3 * 40
+        np.testing.assert_array_equal(runs[0][1], runs[1][1])
+
+
 def test_stall_rule_does_not_touch_a_converging_relaxation():
     """On a relaxation that keeps converging the rule only observes: the same iterations and the
     same displacements with and without it."""
