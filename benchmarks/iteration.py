@@ -1,0 +1,106 @@
+"""One dynamic-relaxation iteration of the main job's wall, by thread count and OpenMP wait policy.
+
+Builds the coarse S5 wall of ``dr-masonry run squat_wall``, runs ``rows`` push rows to reach a
+state with damaged joints, then times ``relax`` for ``iters`` iterations with tol 0 (``repeats``
+batches; best and median per iteration) and its parallel pieces: ``element_and_contact_forces``
+(hexahedra and contact points, one region), ``gather_pair`` (node forces, one region) and
+``internal_forces`` (both, plus the energy sums); ``rest`` = iteration - internal forces (the
+serial residual, damping and update). Every (threads, policy) setting runs in a process of its
+own, since OpenMP reads ``OMP_WAIT_POLICY`` when it starts. BENCHMARKS.md section 16.
+
+Run: ``python benchmarks/iteration.py [threads=1,2 policies=PASSIVE,ACTIVE rows=8 iters=400
+repeats=15]`` (about 1 min per setting); writes ``benchmarks/out/iteration.csv``.
+"""
+import json
+import os
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+from common import ROOT, machine, report  # noqa: I100  (script folder on sys.path)
+
+PARAMS = dict(
+    threads="1,2",
+    policies="PASSIVE,ACTIVE",
+    rows=8,          # push rows before the timing (the main job peaks at row 16)
+    iters=400,       # iterations per timed batch
+    repeats=15,
+    mode="all",      # "all", or "child" (one setting, used by the subprocesses)
+)
+
+
+def best_median(f, repeats):
+    """(best, median) wall time of ``repeats`` calls of ``f``, s."""
+    f()
+    ts = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        f()
+        ts.append(time.perf_counter() - t0)
+    return min(ts), float(np.median(ts))
+
+
+def child(params):
+    """Time one setting (this process's threads and wait policy); prints one JSON line."""
+    import numba
+    from cases import squat_wall
+    from dr_masonry import Stage
+    from dr_masonry.kernels import relaxation as R
+    from dr_masonry.kernels.assembly import gather_pair
+    p = dict(squat_wall.PARAMS, out=os.path.join(ROOT, "benchmarks", "out", "iteration"),
+             h5=None, progress=False)
+    sim, stages = squat_wall.build(p)
+    push = stages[1].controls[0]
+    push.path = push.path[:params["rows"]]
+    sim.run([stages[0], Stage("push", params["rows"], [push], frames=1000)])
+    m, c, d, o = sim.mesh, sim.cont, sim.dyn, sim.options
+    info = np.zeros(R.N_INFO)
+    n = params["iters"]
+
+    def iterations():
+        info[:] = 0.0
+        R.relax(m, c, d, sim.lam, np.zeros(3, np.int64), 1.0, R.DAMP_VISCOUS, o.alpha, 0.0,
+                sim.ref_floor, n, o.check_every, 0, 0.5 * sim.size, info)
+
+    def pieces(f):
+        return lambda: [f() for _ in range(n)]
+
+    us = 1e6 / n
+    out = dict(threads=numba.get_num_threads(), policy=os.environ.get("OMP_WAIT_POLICY"),
+               nodes=d.U.shape[0], hexahedra=m.active.shape[0], contacts=c.slave.shape[0])
+    for name, f in (("iteration", iterations),
+                    ("forces", pieces(lambda: R.element_and_contact_forces(d.X, d.U, m, c))),
+                    ("gather", pieces(lambda: gather_pair(m.fbuf.reshape((-1, 3)), m.ptr, m.rows,
+                                                          c.fbuf, c.ptr, c.rows, d.fint))),
+                    ("internal_forces", pieces(lambda: R.internal_forces(m, c, d)))):
+        b, med = best_median(f, params["repeats"])
+        out[f"{name}_us_best"] = b * us
+        out[f"{name}_us_median"] = med * us
+    out["rest_us_best"] = out["iteration_us_best"] - out["internal_forces_us_best"]
+    print(json.dumps(out), flush=True)
+
+
+def main(argv=None):
+    from dr_masonry.params import parse_overrides
+    params = parse_overrides(PARAMS, sys.argv[1:] if argv is None else argv, __doc__)
+    if params["mode"] == "child":
+        child(params)
+        return
+    print(f"machine: {machine()}")
+    rows = []
+    for policy in params["policies"].split(","):
+        for threads in params["threads"].split(","):
+            env = dict(os.environ, OMP_WAIT_POLICY=policy, NUMBA_NUM_THREADS=threads)
+            args = [sys.executable, os.path.abspath(__file__), "mode=child"] + [
+                f"{k}={params[k]}" for k in ("rows", "iters", "repeats")]
+            res = subprocess.run(args, env=env, capture_output=True, text=True, check=True)
+            rows.append(json.loads(res.stdout.strip().splitlines()[-1]))
+            print(f"  {policy} x {threads}: {rows[-1]['iteration_us_median']:.0f} us per "
+                  f"iteration (median)", flush=True)
+    report(rows, "iteration", "One S5 iteration in place by threads and wait policy, us")
+
+
+if __name__ == "__main__":
+    main()
