@@ -1,6 +1,7 @@
 """What every scene script does around its run: parse its parameters, summarise the solver's
 work, close the result and write the curve (PNG + CSV) and VTK."""
 import os
+import sys
 
 import numpy as np
 
@@ -26,7 +27,8 @@ SOLVER_KEYS = {"resume", "progress", "out", "h5", "frames", "tol", "damping", "c
 def run_stages(sim, stages, params):
     """``sim.run(stages)``; with ``params["resume"]``, continue ``params["h5"]`` from its last
     checkpoint instead (the stored run's parameters must equal ``params`` apart from
-    :data:`SOLVER_KEYS`)."""
+    :data:`SOLVER_KEYS`). Ctrl-C ends the process (exit status 130) with a line saying where the
+    rows so far are and how to continue."""
     if params.get("resume"):
         from .params import ParameterError
         from .results import open_result
@@ -41,7 +43,14 @@ def run_stages(sim, stages, params):
                                  + ", ".join(f"{k}={stored[k]!r}" for k in changed)
                                  + "; continue it with the same parameters")
         sim.resume(path)
-    return sim.run(stages)
+    try:
+        return sim.run(stages)
+    except KeyboardInterrupt:
+        h5 = params.get("h5")
+        sys.stderr.write(f"\ninterrupted in row {sim.increment + 1}" + (
+            f": the rows so far are in {h5}; add resume=true to the same command to continue\n"
+            if h5 else "\n"))
+        raise SystemExit(130) from None
 
 
 def solver_summary(hist, rows):

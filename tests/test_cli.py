@@ -122,3 +122,20 @@ def test_python_m_info(tmp_path):
                           capture_output=True, text=True, env=env, timeout=300)
     assert proc.returncode == 0, proc.stderr
     assert "24 nodes" in proc.stdout and "frames:    3" in proc.stdout
+
+
+def test_interrupted_scene_says_where_its_rows_are(capsys):
+    """Ctrl-C during a scene's run: exit status 130 and a line naming the file and resume=true."""
+    from dr_masonry.scene import run_stages
+
+    class Interrupted:
+        increment = 3
+
+        def run(self, stages):
+            raise KeyboardInterrupt
+
+    with pytest.raises(SystemExit) as exit_:
+        run_stages(Interrupted(), [], {"h5": "results/s6.h5"})
+    assert exit_.value.code == 130
+    err = capsys.readouterr().err
+    assert "row 4" in err and "results/s6.h5" in err and "resume=true" in err
