@@ -167,10 +167,15 @@ def _parser():
 
 
 def main(argv=None):
-    """Entry point of ``dr-masonry``; returns the exit status (2 on bad input)."""
+    """Entry point of ``dr-masonry``; returns the exit status (2 on bad input, 130 after
+    Ctrl-C)."""
     args = _parser().parse_args(argv)
     try:
         return args.func(args)
+    except KeyboardInterrupt as e:   # Ctrl-C: where the results are, not a traceback
+        print("\n".join([f"dr-masonry {args.command}: interrupted"]
+                        + getattr(e, "__notes__", [])), file=sys.stderr)
+        return 130
     except ValueError as e:
         if type(e) is ValueError:  # not one of the project's input errors: keep the traceback
             raise

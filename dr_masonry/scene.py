@@ -1,7 +1,6 @@
 """What every scene script does around its run: parse its parameters, summarise the solver's
 work, close the result and write the curve (PNG + CSV) and VTK."""
 import os
-import sys
 
 import numpy as np
 
@@ -27,8 +26,8 @@ SOLVER_KEYS = {"resume", "progress", "out", "h5", "frames", "tol", "damping", "c
 def run_stages(sim, stages, params):
     """``sim.run(stages)``; with ``params["resume"]``, continue ``params["h5"]`` from its last
     checkpoint instead (the stored run's parameters must equal ``params`` apart from
-    :data:`SOLVER_KEYS`). Ctrl-C ends the process (exit status 130) with a line saying where the
-    rows so far are and how to continue."""
+    :data:`SOLVER_KEYS`). A Ctrl-C (KeyboardInterrupt) goes on up with a note saying where the
+    rows so far are and how to continue (``dr-masonry`` prints just that note)."""
     if params.get("resume"):
         from .params import ParameterError
         from .results import open_result
@@ -45,12 +44,12 @@ def run_stages(sim, stages, params):
         sim.resume(path)
     try:
         return sim.run(stages)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as e:
         h5 = params.get("h5")
-        sys.stderr.write(f"\ninterrupted in row {sim.increment + 1}" + (
-            f": the rows so far are in {h5}; add resume=true to the same command to continue\n"
-            if h5 else "\n"))
-        raise SystemExit(130) from None
+        e.add_note(f"interrupted in row {sim.increment + 1}" + (
+            f": the rows so far are in {h5}; add resume=true to the same command to continue"
+            if h5 else ""))
+        raise
 
 
 def solver_summary(hist, rows):

@@ -124,8 +124,9 @@ def test_python_m_info(tmp_path):
     assert "24 nodes" in proc.stdout and "frames:    3" in proc.stdout
 
 
-def test_interrupted_scene_says_where_its_rows_are(capsys):
-    """Ctrl-C during a scene's run: exit status 130 and a line naming the file and resume=true."""
+def test_interrupted_scene_says_where_its_rows_are(capsys, monkeypatch):
+    """Ctrl-C during a scene's run: the KeyboardInterrupt carries a note naming the file and
+    resume=true, and ``dr-masonry run`` prints it without a traceback, exit status 130."""
     from dr_masonry.scene import run_stages
 
     class Interrupted:
@@ -134,8 +135,15 @@ def test_interrupted_scene_says_where_its_rows_are(capsys):
         def run(self, stages):
             raise KeyboardInterrupt
 
-    with pytest.raises(SystemExit) as exit_:
+    with pytest.raises(KeyboardInterrupt) as e:
         run_stages(Interrupted(), [], {"h5": "results/s6.h5"})
-    assert exit_.value.code == 130
+    note = e.value.__notes__[0]
+    assert "row 4" in note and "results/s6.h5" in note and "resume=true" in note
+
+    def interrupted_main(argv):
+        raise e.value
+    monkeypatch.setattr(cli, "import_case",
+                        lambda name: types.SimpleNamespace(main=interrupted_main))
+    assert main(["run", "squat_wall"]) == 130
     err = capsys.readouterr().err
-    assert "row 4" in err and "results/s6.h5" in err and "resume=true" in err
+    assert "interrupted" in err and "resume=true" in err and "Traceback" not in err
