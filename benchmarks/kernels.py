@@ -180,7 +180,12 @@ def steady(params):
 
 
 def firstcall():
-    """Time the first calls (compile or cache load) in this fresh process; prints JSON."""
+    """Time the first calls (compile or cache load) in this fresh process; prints JSON.
+
+    ``relax`` first: it holds every kernel a run needs (the iteration's fused force kernel
+    included), so build + relax is what a run's cold start compiles
+    (``production_total_s``); ``hex_forces`` and ``contact_forces`` alone, compiled after it,
+    serve the tests and these benchmarks only."""
     from dr_masonry.kernels.contact_forces import contact_forces
     from dr_masonry.kernels.hex8 import hex_forces
     from dr_masonry.kernels.relaxation import relax
@@ -188,12 +193,14 @@ def firstcall():
     t0 = t1 = time.perf_counter()
     sim = build(0.44, 0.243)
     t["build_s (geometry kernels + set-up)"] = time.perf_counter() - t1
-    for name, fn, args in (("hex_forces_s", hex_forces, hex_args(sim, displacement(sim, 1e-5, 0), False)),
-                           ("contact_forces_s", contact_forces, contact_args(sim, displacement(sim, 0, 1e-7))),
-                           ("relax_s", relax, gravity(sim))):
+    for name, fn, args in (("relax_s", relax, gravity(sim)),
+                           ("hex_forces_s", hex_forces, hex_args(sim, displacement(sim, 1e-5, 0), False)),
+                           ("contact_forces_s", contact_forces, contact_args(sim, displacement(sim, 0, 1e-7)))):
         t1 = time.perf_counter()
         fn(*args)
         t[name] = time.perf_counter() - t1
+        if name == "relax_s":
+            t["production_total_s"] = time.perf_counter() - t0
     t["first_calls_total_s"] = time.perf_counter() - t0
     print(json.dumps(t))
 
