@@ -708,19 +708,17 @@ class Simulation:
                     ok = self.coarse.correct(self.lam, rpres, ctrl)
                     rejected = 0 if ok else rejected + 1
                     tries += 1
-                    # a rejected correction, and every one after the first ten of an increment
-                    # (in softening, accepted steps may keep restarting the relaxation without
-                    # finishing it), let the relaxation run twice as long before the next try;
-                    # after two rejections in a row the secant model no longer helps: plain
-                    # relaxation finishes the increment
-                    if rejected >= 2:
-                        every = max_iter
-                    elif ok and tries <= 10:
-                        every = o.coarse_every
-                    else:
-                        every = min(2 * every, 64 * o.coarse_every)
-                else:
+                # a rejected correction, and every one after the first ten of an increment (in
+                # softening, accepted steps may keep restarting the relaxation without finishing
+                # it), let the relaxation run twice as long before the next try; after two
+                # rejections in a row (or without the coarse correction) plain relaxation
+                # finishes the increment
+                if rejected >= 2:
                     every = max_iter
+                elif ok and tries <= 10:
+                    every = o.coarse_every
+                else:
+                    every = min(2 * every, 64 * o.coarse_every)
                 span_end = min(done + every, max_iter)
                 info[R.I_SEG] = 0
             info[R.I_LEFT] = max_iter - done

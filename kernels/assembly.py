@@ -47,16 +47,6 @@ def _rows_sum(buf, ptr, rows, i):
 
 
 @pjit
-def gather_add(buf, ptr, rows, out):
-    """``out[i] += sum(buf[rows[ptr[i]:ptr[i+1]]])`` for every node i; buf (m, 3), out (n, 3)."""
-    for i in prange(out.shape[0]):
-        a0, a1, a2 = _rows_sum(buf, ptr, rows, i)
-        out[i, 0] += a0
-        out[i, 1] += a1
-        out[i, 2] += a2
-
-
-@pjit
 def gather_pair(buf_a, ptr_a, rows_a, buf_b, ptr_b, rows_b, out):
     """``out[i] = (node i's rows of buf_a) + (its rows of buf_b)`` in one pass (two maps of
     :func:`node_row_map`, e.g. hexahedra and contact points); out (n, 3) overwritten."""

@@ -6,7 +6,7 @@ import scipy.sparse.linalg as spla
 
 import naive_hex8 as nv
 from dr_masonry.kernels import hex8
-from dr_masonry.kernels.assembly import gather_add, node_row_map
+from dr_masonry.kernels.assembly import gather_pair, node_row_map
 from dr_masonry.kernels.plastic_damage import NMS
 from dr_masonry.materials.plastic_damage import PlasticDamage
 from dr_masonry.model import HEX_NATURAL
@@ -54,10 +54,8 @@ def run_forces(U, X, conn, E, nu, elem_mat=None, params=None):
     energy = np.full(ne, np.nan)
     hex8.hex_forces(np.ascontiguousarray(U, dtype=float), conn, np.arange(ne), dN, geo, wdet, h,
                     elem_mat, params, s_old, s_new, f_elem, energy)
-    ptr, idx = node_row_map(conn, X.shape[0])
-    f_node = np.empty_like(X)
-    f_node[:] = 0.0
-    gather_add(f_elem.reshape(-1, 3), ptr, idx, f_node)
+    f_node = np.zeros_like(X)
+    np.add.at(f_node, conn.ravel(), f_elem.reshape(-1, 3))
     return f_elem, energy, f_node
 
 
@@ -431,6 +429,8 @@ def test_node_map_and_gather():
     f_elem = rng.normal(size=(conn.shape[0], 8, 3))
     ref = np.zeros((nn, 3))
     np.add.at(ref, conn.ravel(), f_elem.reshape(-1, 3))
-    f_node = np.zeros((nn, 3))
-    gather_add(f_elem.reshape(-1, 3), ptr, idx, f_node)
+    f_node = np.full((nn, 3), np.nan)   # overwritten, nodes without elements included
+    k = 5   # the elements in two buffers with maps of their own, as hexahedra and contacts
+    gather_pair(f_elem[:k].reshape(-1, 3), *node_row_map(conn[:k], nn),
+                f_elem[k:].reshape(-1, 3), *node_row_map(conn[k:], nn), f_node)
     assert np.allclose(f_node, ref, rtol=1e-14, atol=1e-14)
