@@ -1,7 +1,9 @@
 """Shared helpers of the benchmark scripts: output folder, machine line, table and CSV writing."""
 import csv
+import json
 import os
 import platform
+import subprocess
 import sys
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -54,3 +56,14 @@ def _fmt(v):
     if isinstance(v, float):
         return f"{v:.4g}" if abs(v) < 1e4 else f"{v:,.0f}"
     return str(v)
+
+
+def child_row(script, overrides, env=None):
+    """Run the benchmark file ``script`` with ``overrides`` (``key=value`` strings) in a fresh
+    interpreter (its own threads, environment and compiled state); returns the dict of the JSON
+    line it prints last. A failing child raises RuntimeError with the end of its stderr."""
+    res = subprocess.run([sys.executable, os.path.abspath(script)] + list(overrides), env=env,
+                         capture_output=True, text=True)
+    if res.returncode:
+        raise RuntimeError(f"{os.path.basename(script)} {' '.join(overrides)}: {res.stderr[-2000:]}")
+    return json.loads(res.stdout.strip().splitlines()[-1])

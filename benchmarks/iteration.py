@@ -13,13 +13,12 @@ repeats=15]`` (about 1 min per setting); writes ``benchmarks/out/iteration.csv``
 """
 import json
 import os
-import subprocess
 import sys
 import time
 
 import numpy as np
 
-from common import ROOT, machine, report  # noqa: I100  (script folder on sys.path)
+from common import ROOT, child_row, machine, report  # noqa: I100  (script folder on sys.path)
 
 PARAMS = dict(
     threads="1,2",
@@ -93,10 +92,8 @@ def main(argv=None):
     for policy in params["policies"].split(","):
         for threads in params["threads"].split(","):
             env = dict(os.environ, OMP_WAIT_POLICY=policy, NUMBA_NUM_THREADS=threads)
-            args = [sys.executable, os.path.abspath(__file__), "mode=child"] + [
-                f"{k}={params[k]}" for k in ("rows", "iters", "repeats")]
-            res = subprocess.run(args, env=env, capture_output=True, text=True, check=True)
-            rows.append(json.loads(res.stdout.strip().splitlines()[-1]))
+            rows.append(child_row(__file__, ["mode=child"] + [
+                f"{k}={params[k]}" for k in ("rows", "iters", "repeats")], env))
             print(f"  {policy} x {threads}: {rows[-1]['iteration_us_median']:.0f} us per "
                   f"iteration (median)", flush=True)
     report(rows, "iteration", "One S5 iteration in place by threads and wait policy, us")

@@ -31,14 +31,13 @@ Run: ``python benchmarks/penalty.py [factors=3,10,30,100 scenes=s2,s5fast,s6fast
 """
 import json
 import os
-import subprocess
 import sys
 import time
 import warnings
 
 import numpy as np
 
-from common import OUT, ROOT, machine, report  # noqa: I100  (script folder on sys.path)
+from common import OUT, ROOT, child_row, machine, report  # noqa: I100  (script folder on sys.path)
 
 PARAMS = dict(
     factors="3,10,30,100",   # kc_pen / knn
@@ -158,14 +157,8 @@ def main(argv=None):
     for scene in params["scenes"].split(","):
         got = []
         for f in factors:
-            args = [sys.executable, os.path.abspath(__file__), "mode=one", f"scene={scene}",
-                    f"factor={f}"] + [f"{k}={params[k]}" for k in ("sigma", "s5_drift",
-                                                                     "s5_increments",
-                                                                     "s6_increments")]
-            res = subprocess.run(args, capture_output=True, text=True)
-            if res.returncode:
-                raise RuntimeError(f"{scene} factor {f}: {res.stderr[-2000:]}")
-            got.append(json.loads(res.stdout.strip().splitlines()[-1]))
+            got.append(child_row(__file__, ["mode=one", f"scene={scene}", f"factor={f}"] + [
+                f"{k}={params[k]}" for k in ("sigma", "s5_drift", "s5_increments", "s6_increments")]))
             print(f"  {scene} x{f:g}: {got[-1]['iterations']} iterations, {got[-1]['wall_s']:.1f} s, "
                   f"peak {got[-1]['peak']:.5g}", flush=True)
         ref_peak, ref_k0 = extrapolated(got, "peak"), extrapolated(got, "k0")
