@@ -51,6 +51,7 @@ PARAMS = dict(
     n_amplitudes=0,         # cyclic: run only the first n amplitudes (0: all)
     pre_increments=4,       # increments of the pre-compression stage
     mesh="coarse",          # coarse (1 x 1 x 1 hexahedra per brick) | fine (4 x 1 x 2)
+    kc_factor=squat_wall.KC_PEN_FACTOR,  # compression penalty of the joints / knn (BENCHMARKS 18)
     gravity=True,
     beam_height=0.20,       # steel loading beam height, m
     tol=1e-4,

@@ -41,9 +41,10 @@ from dr_masonry import (Displacement, Force, JointLaw, Load, Model, PlasticDamag
                         SolverOptions, Stage)
 from dr_masonry.geometry import BrickSpec, add_beam, add_foundation, add_wall, plane_nodes
 from dr_masonry.loading import Gravity
+from dr_masonry.materials.joint import KC_PEN_FACTOR
 from dr_masonry.params import ParameterError
 from dr_masonry.protocols import S5
-from dr_masonry.scene import finish, run_stages, scene_params, solver_summary
+from dr_masonry.scene import finish, run_stages, scene_params, solver_summary, with_penalty
 from dr_masonry.units import MPa, kN, mm
 
 PARAMS = dict(
@@ -60,6 +61,7 @@ PARAMS = dict(
     pre_increments=4,       # increments of the pre-compression stage
     mesh="coarse",          # coarse (1 x 1 x 1 hexahedra per brick) | fine (4 x 1 x 2)
     shear_damage="calibrated",  # calibrated | paper (JointLaw.shear_damage)
+    kc_factor=KC_PEN_FACTOR,    # compression penalty of the joints / knn (BENCHMARKS.md section 18)
     variant="reference",    # reference | PAR_A | PAR_B | PAR_C | PAR_D | PAR_E
     gravity=True,           # self-weight of wall and beam
     beam_height=0.20,       # steel loading beam height, m
@@ -120,7 +122,7 @@ def rig(params, law, block):
     """A wall on a fixed foundation under a stiff steel loading beam (S4, S5, S6).
 
     Uses ``length``, ``height``, ``mesh``, ``beam_height``, ``gravity``, ``sigma``, ``tol``,
-    ``damping`` of ``params``. Returns ``(sim, wall, beam, base, pre)``: the simulation, the
+    ``damping``, ``kc_factor`` (the joints' compression penalty, x knn) of ``params``. Returns ``(sim, wall, beam, base, pre)``: the simulation, the
     :class:`~dr_masonry.geometry.Wall`, the beam's reference point (centre of the wall's top face),
     the foundation's top-face node set (reactions ``base.f*``) and the pre-compression controls
     (gravity and the force ``N`` that makes the top of the wall carry ``sigma`` x plan area, the
@@ -130,7 +132,7 @@ def rig(params, law, block):
         raise ParameterError(f"parameter sigma={params['sigma']!r}: must be >= 0 Pa (compression)")
     brick = MESHES[_choice(params, "mesh", tuple(MESHES))]
     model = Model()
-    model.set_joint_law(law)
+    model.set_joint_law(with_penalty(law, params["kc_factor"]))
     courses = max(1, int(round(params["height"] / brick.height)))
     wall = add_wall(model, (0, 0, 0), params["length"], courses * brick.height, block,
                     brick=brick, fit="cut")

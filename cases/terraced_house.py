@@ -42,9 +42,10 @@ from dr_masonry import (Combined, Displacement, Indirect, JointLaw, Load, Model,
                         PointLoad, Simulation, SolverOptions, Stage)
 from dr_masonry.geometry import BrickSpec, HouseParams, terraced_house
 from dr_masonry.loading import Gravity
+from dr_masonry.materials.joint import KC_PEN_FACTOR
 from dr_masonry.params import ParameterError
 from dr_masonry.protocols import S7
-from dr_masonry.scene import finish, run_stages, scene_params, solver_summary
+from dr_masonry.scene import finish, run_stages, scene_params, solver_summary, with_penalty
 from dr_masonry.units import kN, mm
 
 PARAMS = dict(
@@ -58,6 +59,7 @@ PARAMS = dict(
     gravity_increments=4,
     mesh="coarse",          # coarse (1 x 1 x 1 hexahedra per brick) | fine (4 x 1 x 2)
     slab_element=0.22,      # slab and foundation hexahedron size in plan, m
+    kc_factor=KC_PEN_FACTOR,  # compression penalty of the joints / knn (BENCHMARKS.md section 18)
     tol=1e-4,
     damping="viscous",
     coarse=True,            # two-level relaxation (SolverOptions.coarse)
@@ -103,7 +105,7 @@ def build(params):
     hp = house_params(params)
     lay = hp.layout()
     model = Model()
-    model.set_joint_law(JointLaw.reference())
+    model.set_joint_law(with_penalty(JointLaw.reference(), params["kc_factor"]))
     slab = CONCRETE.with_changes(density=CONCRETE.density * hp.slab_thickness / lay.slab_thickness)
     groups = terraced_house(model, hp, PlasticDamage.reference(), CONCRETE, slab)
     sim = Simulation(model, SolverOptions(tol=params["tol"], damping=params["damping"],

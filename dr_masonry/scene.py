@@ -23,6 +23,15 @@ SOLVER_KEYS = {"resume", "progress", "out", "h5", "frames", "tol", "damping", "c
                "max_dissipation"}
 
 
+def with_penalty(law, factor):
+    """``law`` (JointLaw) with the compression penalty ``factor`` x knn: the scene parameter
+    ``kc_factor`` (default ``KC_PEN_FACTOR``; its effect: BENCHMARKS.md section 18)."""
+    from .params import ParameterError
+    if not (isinstance(factor, (int, float)) and np.isfinite(factor) and factor > 0):
+        raise ParameterError(f"parameter kc_factor={factor!r}: must be a positive multiple of knn")
+    return law.with_changes(kc_pen=factor * law.knn)
+
+
 def run_stages(sim, stages, params):
     """``sim.run(stages)``; with ``params["resume"]``, continue ``params["h5"]`` from its last
     checkpoint instead (the stored run's parameters must equal ``params`` apart from

@@ -93,6 +93,19 @@ def test_scene_input_errors():
         out_of_plane_wall.build(fast(out_of_plane_wall, protocol="random"))
 
 
+@pytest.mark.parametrize("module", [terraced_house, out_of_plane_wall])
+def test_kc_factor_sets_the_compression_penalty(module):
+    """Scene parameter ``kc_factor``: every joint law's penalty is that multiple of its knn; the
+    default is the library's (KC_PEN_FACTOR); a non-positive factor names the parameter."""
+    from dr_masonry.materials.joint import KC_PEN_FACTOR
+    for factor, expected in ((None, KC_PEN_FACTOR), (30.0, 30.0)):
+        kw = {} if factor is None else {"kc_factor": factor}
+        laws = module.build(fast(module, **kw))[0].model.joint_laws
+        assert laws and all(lw.kc_pen == pytest.approx(expected * lw.knn) for lw in laws)
+    with pytest.raises(ParameterError, match="kc_factor"):
+        module.build(fast(module, kc_factor=0.0))
+
+
 def test_contact_reaction_needs_a_joint(s7):
     sim = terraced_house.build(fast(terraced_house))[0]
     g = sim.groups
