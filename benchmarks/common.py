@@ -67,3 +67,16 @@ def child_row(script, overrides, env=None):
     if res.returncode:
         raise RuntimeError(f"{os.path.basename(script)} {' '.join(overrides)}: {res.stderr[-2000:]}")
     return json.loads(res.stdout.strip().splitlines()[-1])
+
+
+def start(defaults, doc, argv, child_mode, child):
+    """Parameters of a benchmark script's ``main`` (``key=value`` overrides of ``defaults``);
+    ``None`` after running ``child(params)`` when ``params["mode"]`` is ``child_mode`` (the
+    script called by itself for one setting), else the parameters with the machine line printed."""
+    from dr_masonry.params import parse_overrides
+    params = parse_overrides(defaults, sys.argv[1:] if argv is None else argv, doc)
+    if params["mode"] == child_mode:
+        child(params)
+        return None
+    print(f"machine: {machine()}")
+    return params

@@ -13,12 +13,11 @@ repeats=15]`` (about 1 min per setting); writes ``benchmarks/out/iteration.csv``
 """
 import json
 import os
-import sys
 import time
 
 import numpy as np
 
-from common import ROOT, child_row, machine, report  # noqa: I100  (script folder on sys.path)
+from common import ROOT, child_row, report, start  # noqa: I100  (script folder on sys.path)
 
 PARAMS = dict(
     threads="1,2",
@@ -82,12 +81,9 @@ def child(params):
 
 
 def main(argv=None):
-    from dr_masonry.params import parse_overrides
-    params = parse_overrides(PARAMS, sys.argv[1:] if argv is None else argv, __doc__)
-    if params["mode"] == "child":
-        child(params)
+    params = start(PARAMS, __doc__, argv, "child", child)
+    if params is None:
         return
-    print(f"machine: {machine()}")
     rows = []
     for policy in params["policies"].split(","):
         for threads in params["threads"].split(","):

@@ -31,13 +31,12 @@ Run: ``python benchmarks/penalty.py [factors=3,10,30,100 scenes=s2,s5fast,s6fast
 """
 import json
 import os
-import sys
 import time
 import warnings
 
 import numpy as np
 
-from common import OUT, ROOT, child_row, machine, report  # noqa: I100  (script folder on sys.path)
+from common import OUT, ROOT, child_row, report, start  # noqa: I100  (script folder on sys.path)
 
 PARAMS = dict(
     factors="3,10,30,100",   # kc_pen / knn
@@ -146,12 +145,9 @@ def plot(rows, path):
 
 
 def main(argv=None):
-    from dr_masonry.params import parse_overrides
-    params = parse_overrides(PARAMS, sys.argv[1:] if argv is None else argv, __doc__)
-    if params["mode"] == "one":
-        one(params)
+    params = start(PARAMS, __doc__, argv, "one", one)
+    if params is None:
         return
-    print(f"machine: {machine()}")
     rows = []
     factors = [float(v) for v in params["factors"].split(",")]
     for scene in params["scenes"].split(","):
