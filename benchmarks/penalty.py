@@ -7,14 +7,16 @@ paper but enters the Gershgorin bound of the fictitious masses of every node on 
 relaxation needs more iterations (about sqrt of the masses). This script sweeps the factor
 ``kc_pen / knn`` (every joint law of the scene) and reports, per scene and factor:
 
-* ``mass``: median fictitious mass of the nodes on joints, relative to the default factor
-  (the step of the relaxation is fixed at 1; a heavier node is a shorter stable step);
+* ``mass``: median fictitious mass of the nodes on joints, relative to the default factor 10
+  (kg when the sweep leaves 10 out; the step of the relaxation is fixed at 1, so a heavier node
+  is a shorter stable step);
 * ``iterations`` and ``wall_s`` of the run (iterations are exact, wall times noisy);
 * ``peak``: largest |y| of the scene's curve, and ``k0``: the secant stiffness y / x at the
   first row of the loading stage;
 * ``err_peak``, ``err_k0``: relative to the same quantities extrapolated to a rigid closed joint
   (the paper's), from the two stiffest factors of the sweep assuming an error proportional to
-  1 / kc_pen (the compliance the penalty adds);
+  1 / kc_pen (the compliance the penalty adds); a run the solver stopped (``status``) still gives
+  the peak and ``k0`` of the rows it completed;
 * ``compliance``: the penalty's compression compliance per course against the brick's,
   E / (kc_pen h), for the reference brick (E = 4.8 GPa, h = 81 mm) and joint (knn = 75 GPa/m):
   the error of a column of bricks loaded along its axis.
