@@ -35,6 +35,7 @@ from dr_masonry import (Combined, Displacement, Indirect, JointLaw, PlasticDamag
                         Stage)
 from dr_masonry.cases import squat_wall
 from dr_masonry.geometry import plane_nodes
+from dr_masonry.materials.joint import KC_PEN_FACTOR
 from dr_masonry.protocols import S6
 from dr_masonry.scene import finish, run_stages, scene_params, solver_summary
 from dr_masonry.units import MPa, kN, mm
@@ -51,7 +52,7 @@ PARAMS = dict(
     n_amplitudes=0,         # cyclic: run only the first n amplitudes (0: all)
     pre_increments=4,       # increments of the pre-compression stage
     mesh="coarse",          # coarse (1 x 1 x 1 hexahedra per brick) | fine (4 x 1 x 2)
-    kc_factor=squat_wall.KC_PEN_FACTOR,  # compression penalty of the joints / knn (BENCHMARKS 18)
+    kc_factor=KC_PEN_FACTOR,  # compression penalty of the joints / knn (BENCHMARKS.md section 18)
     gravity=True,
     beam_height=0.20,       # steel loading beam height, m
     tol=1e-4,
