@@ -43,7 +43,7 @@ import warnings
 
 import numpy as np
 
-from common import OUT, ROOT, machine, report  # noqa: I100  (script folder on sys.path)
+from common import OUT, ROOT, report, start  # noqa: I100  (script folder on sys.path)
 
 PARAMS = dict(
     scenes="s2,s5fast",      # s2 | s3 | s5fast (comma separated)
@@ -232,13 +232,10 @@ def conclusion(rows):
 
 
 def main(argv=None):
-    from dr_masonry.params import parse_overrides
     argv = sys.argv[1:] if argv is None else list(argv)
-    params = parse_overrides(PARAMS, argv, __doc__)
-    if params["mode"] == "one":
-        one(params)
+    params = start(PARAMS, __doc__, argv, "one", one)
+    if params is None:
         return
-    print(f"machine: {machine()}")
     os.makedirs(H5, exist_ok=True)
     run_all(params, argv)
 
