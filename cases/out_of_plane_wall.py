@@ -59,6 +59,7 @@ PARAMS = dict(
     damping="viscous",
     coarse=True,            # two-level relaxation (SolverOptions.coarse)
     max_dissipation=0.0,    # load-step control (SolverOptions.max_dissipation; 0: off)
+    redetect=True,          # finite sliding of the joints (SolverOptions.redetect)
     frames=5,               # write a field frame every this many increments
     resume=False,           # continue the run stored in out.h5 from its last checkpoint
     fast=False,             # preset FAST: tiny 0.88 x 0.81 m coarse wall, few increments

@@ -69,6 +69,7 @@ PARAMS = dict(
     damping="viscous",
     coarse=True,            # two-level relaxation (SolverOptions.coarse)
     max_dissipation=0.0,    # load-step control (SolverOptions.max_dissipation; 0: off)
+    redetect=True,          # finite sliding of the joints (SolverOptions.redetect)
     frames=5,               # write a field frame every this many increments
     resume=False,           # continue the run stored in out.h5 from its last checkpoint
     fast=False,             # preset FAST: tiny 0.88 x 0.81 m coarse wall, few increments
@@ -145,6 +146,7 @@ def rig(params, law, block):
     sim = Simulation(model, SolverOptions(tol=params["tol"], damping=params["damping"],
                                           coarse=params["coarse"],
                                           max_dissipation=params["max_dissipation"],
+                                          redetect=params["redetect"],
                                           progress=params.get("progress", False)),
                      output=params.get("h5"), config=params)
     beam = sim.rigid_point("beam", blocks=[beam_block], position=(0.5 * L, 0.5 * t, H))

@@ -64,6 +64,7 @@ PARAMS = dict(
     damping="viscous",
     coarse=True,            # two-level relaxation (SolverOptions.coarse)
     max_dissipation=0.0,    # load-step control (SolverOptions.max_dissipation; 0: off)
+    redetect=True,          # finite sliding of the joints (SolverOptions.redetect)
     frames=5,               # write a field frame every this many increments
     resume=False,           # continue the run stored in out.h5 from its last checkpoint
     fast=False,             # preset FAST: small coarse house of large blocks, few increments
@@ -111,6 +112,7 @@ def build(params):
     sim = Simulation(model, SolverOptions(tol=params["tol"], damping=params["damping"],
                                           coarse=params["coarse"],
                                           max_dissipation=params["max_dissipation"],
+                                          redetect=params["redetect"],
                                           progress=params.get("progress", False)),
                      output=params.get("h5"), config=params)
     floors = [sim.rigid_point(f"floor{i + 1}", blocks=groups[f"slabs_floor{i + 1}"])

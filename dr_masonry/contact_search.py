@@ -476,7 +476,7 @@ def detect_contacts(model, tol=None, angle_tol=ANGLE_TOL):
     return cs
 
 
-def redetect(model, contacts, x_current, slack=SLIDE_SLACK, reach=None):
+def redetect(model, contacts, x_current, slack=SLIDE_SLACK, reach=None, rows=None):
     """Re-assign slave nodes that slid off their master quad (finite sliding).
 
     A contact point whose slave node now projects outside its master quad (|r| or |s| >
@@ -499,6 +499,8 @@ def redetect(model, contacts, x_current, slack=SLIDE_SLACK, reach=None):
     reach : float or None, m
         normal and in-plane search distance; None: half the largest element edge of the slave
         block, per contact point.
+    rows : (nc,) bool or None
+        the rows that may be re-assigned (None: all); the others are kept as they are.
 
     Returns
     -------
@@ -517,7 +519,10 @@ def redetect(model, contacts, x_current, slack=SLIDE_SLACK, reach=None):
         return contacts, src
     xs = x[contacts.slave]
     r, s = project_bilinear(x[contacts.master], xs)
-    moved = np.flatnonzero((np.abs(r) > 1.0 + slack) | (np.abs(s) > 1.0 + slack))
+    out = (np.abs(r) > 1.0 + slack) | (np.abs(s) > 1.0 + slack)
+    if rows is not None:
+        out &= np.asarray(rows, dtype=bool)
+    moved = np.flatnonzero(out)
     if moved.size == 0:
         return contacts, src
     bs = contacts.blocks[moved, 0]
@@ -545,7 +550,8 @@ def redetect(model, contacts, x_current, slack=SLIDE_SLACK, reach=None):
     row, fid, u = row[ok], fid[ok], u[ok]
     best = np.lexsort((np.abs(u), row))
     row, fid = row[best], fid[best]
-    first = np.r_[True, row[1:] != row[:-1]]
+    first = np.ones(row.size, bool)
+    first[1:] = row[1:] != row[:-1]
     row, fid = row[first], fid[first]
     new = contacts.subset(np.arange(nc))
     if row.size:
@@ -613,8 +619,8 @@ def overhang(x, slave, sides):
 
     ``x`` (n_nodes, 3) m current coordinates, ``slave`` (nc,) node ids, ``sides`` (nc, 4) from
     :func:`master_sides`. 0 for a node over the face; otherwise the distance beyond the nearest
-    violated edge line. The contact points are paired in the reference configuration (small
-    sliding): a node that slid off its master block's face still pushes on it.
+    violated edge line (a node that slid off its master block's face with no other face under
+    it still pushes on it: :mod:`dr_masonry.sliding`).
     """
     q = x[sides]                                                   # (nc, 4, 3)
     n = np.cross(q[:, 2] - q[:, 0], q[:, 3] - q[:, 1])

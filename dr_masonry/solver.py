@@ -98,6 +98,11 @@ class SolverOptions:
         time have passed since the last time (0: after every increment, and after each committed
         part of a cut increment), so that an interrupted long run loses at most about this much
         work
+    redetect : finite sliding of the joints: after every increment, contact points whose slave
+        node slid off its master quad are paired with the quad now under it, and points that slid
+        off every face carry no force until one takes them back (:mod:`dr_masonry.sliding`;
+        nothing runs while no node leaves its quad). False keeps the pairing of the reference
+        configuration (small sliding)
     progress : show a progress bar
     """
     damping: str = "viscous"
@@ -114,6 +119,7 @@ class SolverOptions:
     coarse: object = "auto"
     coarse_every: int = 200
     checkpoint_s: float = 60.0
+    redetect: bool = True
     progress: bool = False
 
     def __post_init__(self):
@@ -133,6 +139,8 @@ class SolverOptions:
         if not (np.isfinite(self.max_dissipation) and self.max_dissipation >= 0):
             raise ValueError(f"SolverOptions.max_dissipation must be >= 0 (0: off), got "
                              f"{self.max_dissipation}")
+        if not isinstance(self.redetect, (bool, np.bool_)):
+            raise ValueError(f"SolverOptions.redetect must be True or False, got {self.redetect!r}")
         if not (np.isfinite(self.checkpoint_s) and self.checkpoint_s >= 0):
             raise ValueError(f"SolverOptions.checkpoint_s must be >= 0 s, got {self.checkpoint_s}")
         if (self.max_iter < 1 or self.check_every < 1 or self.max_cuts < 0
@@ -170,6 +178,7 @@ class Simulation:
         self.rigid_points = []
         self.node_sets = {}
         self.contact_reactions = {}
+        self._reaction_blocks = {}   # name -> (blocks, support), to re-select rows after sliding
         self._fixed = np.zeros((model.n_nodes, 3), dtype=bool)
         fixed_blocks = np.nonzero(model.block_fixed)[0]
         self._fixed[model.block_nodes(fixed_blocks)] = True
@@ -217,6 +226,8 @@ class Simulation:
         if not (on_slave.any() or on_master.any()):
             raise L.LoadingError(f"contact reaction {name!r}: no joint between the two block sets")
         self.contact_reactions[name] = (np.nonzero(on_slave)[0], np.nonzero(on_master)[0])
+        self._reaction_blocks[name] = (np.asarray(blocks, dtype=np.int64),
+                                       np.asarray(support, dtype=np.int64))
 
     def _check_name(self, name):
         if name in self.contact_reactions:
@@ -286,13 +297,12 @@ class Simulation:
                          np.zeros((conn.shape[0], 8, 3)), np.zeros(conn.shape[0]), ptr, rows)
         self.mass = lumped_mass(conn, wdet, rho, n)  # physical, kg
         a = active
-        rowsum = stiffness_rowsum(conn[a], dN, geo[a], wdet[a], E[a], nu[a], n)
+        self._rowsum_solid = stiffness_rowsum(conn[a], dN, geo[a], wdet[a], E[a], nu[a], n)
         c = m.contacts
         laws = m.joint_laws
+        self._kbound = np.array([lw.stiffness_bound() for lw in laws])   # per law, Pa/m
         if c.n:
             lparams = np.ascontiguousarray(np.vstack([lw.params_array() for lw in laws]))
-            kb = np.array([lw.stiffness_bound() for lw in laws])[c.law]
-            rowsum = rowsum + contact_rowsum(c.slave, c.master, c.xi, c.area, kb, n)
             js0 = np.stack([lw.initial_state() for lw in laws])[c.law]
         else:
             from .kernels.joint_law import NJP, NJS
@@ -305,43 +315,37 @@ class Simulation:
         self._overhang0 = overhang(m.nodes, c.slave, self._sides)  # partial overlaps at the start
         q = m.nodes[self._sides]
         self._side_size = np.linalg.norm(q[:, [1, 2, 3, 0]] - q, axis=2).min(axis=1)
-        self.cont = Cont(c.slave, c.master, c.xi, c.area, c.law, lparams, c.gap0,
-                         np.ascontiguousarray(js0), js0.copy(), np.zeros((nc, 3)), np.zeros((nc, 3)),
-                         np.zeros((nc * 5, 3)), np.zeros(nc), cptr, crows)
+        # copies: finite sliding re-pairs points in place, ``model.contacts`` stays as detected
+        self.cont = Cont(c.slave, c.master.copy(), c.xi.copy(), c.area.copy(), c.law.copy(),
+                         lparams, c.gap0.copy(), np.ascontiguousarray(js0), js0.copy(),
+                         np.zeros((nc, 3)), np.zeros((nc, 3)), np.zeros((nc * 5, 3)), np.zeros(nc),
+                         cptr, crows)
+        rowsum = self._rowsum()
         free_nodes = ~self._fixed.all(axis=1) & (tied < 0)
         if np.any(rowsum[free_nodes] <= 0):
             bad = int(np.nonzero(free_nodes & (rowsum <= 0))[0][0])
             raise SolverError(f"node {bad} (block {m.node_block[bad]}) has no stiffness: it belongs to "
                               f"no active element and no contact")
-        fict = np.where(rowsum > 0, o.safety * rowsum / 4.0, 1.0)
         free = (~self._fixed).astype(np.float64)
         nr = len(self.rigid_points)
         rpX = np.zeros((nr, 3))
-        rpminv = np.ones((nr, 6))
-        rpradius = np.ones(nr)
         rpptr = np.zeros(nr + 1, dtype=np.int64)
         for p, rp in enumerate(self.rigid_points):
             if self._fixed[rp.nodes].any():
                 raise L.LoadingError(f"rigid point {rp.name!r} ties nodes that are also fixed")
             free[rp.nodes] = 0.0
             rpX[p] = rp.position
-            arm2 = ((X[rp.nodes] - rp.position) ** 2).sum(axis=1)
-            mt = (fict[rp.nodes] * (rowsum[rp.nodes] > 0)).sum()
-            if mt <= 0.0:
-                raise L.LoadingError(f"rigid point {rp.name!r}: its nodes touch no deformable element "
-                                     f"and no contact, so nothing resists its motion")
-            jr = (fict[rp.nodes] * (rowsum[rp.nodes] > 0) * arm2).sum()
-            rpminv[p, :3] = 1.0 / mt
-            rpminv[p, 3:] = 1.0 / max(jr, 1e-300)
-            rpradius[p] = np.sqrt(max(jr / mt, 1e-300))
             rpptr[p + 1] = rpptr[p] + rp.nodes.size
+        minv, rpminv, rpradius = self._masses(rowsum)
         rpnodes = (np.concatenate([rp.nodes for rp in self.rigid_points]) if nr
                    else np.zeros(0, np.int64))
         z = np.zeros((n, 3))
-        self.dyn = Dyn(X, z.copy(), z.copy(), 1.0 / fict, free, tied, z.copy(), z.copy(), z.copy(),
+        self.dyn = Dyn(X, z.copy(), z.copy(), minv, free, tied, z.copy(), z.copy(), z.copy(),
                        z.copy(), rpX, np.zeros((nr, 6)), np.zeros((nr, 6)), rpminv,
                        np.ones((nr, 6)), np.zeros((nr, 6)), np.zeros((nr, 6)), rpptr, rpnodes,
                        rpradius)
+        from .sliding import Sliding
+        self.sliding = Sliding(self) if (o.redetect and nc) else None
         movable = int((~m.block_fixed).sum())
         self.use_coarse = (o.coarse is True
                            or (o.coarse == "auto" and movable >= COARSE_MIN_BLOCKS))
@@ -368,6 +372,57 @@ class Simulation:
         self._built = True
         if self._resuming:
             self._load_checkpoint()
+
+    def _rowsum(self):
+        """Gershgorin row sums (n_nodes,) N/m of the elements and the current contact set."""
+        c = self.cont
+        if c.slave.size == 0:
+            return self._rowsum_solid
+        return self._rowsum_solid + contact_rowsum(c.slave, c.master, c.xi, c.area,
+                                                   self._kbound[c.law], self.model.n_nodes)
+
+    def _masses(self, rowsum):
+        """Inverse fictitious masses from the row sums ``rowsum`` (n_nodes,) N/m: of the nodes
+        (n_nodes,) 1/kg, of the reference points (n_rp, 6) and their radii of gyration (n_rp,) m
+        (the tied nodes' masses and their second moment about the point)."""
+        fict = np.where(rowsum > 0, self.options.safety * rowsum / 4.0, 1.0)
+        nr = len(self.rigid_points)
+        rpminv = np.ones((nr, 6))
+        rpradius = np.ones(nr)
+        for p, rp in enumerate(self.rigid_points):
+            w = fict[rp.nodes] * (rowsum[rp.nodes] > 0)
+            mt = w.sum()
+            if mt <= 0.0:
+                raise L.LoadingError(f"rigid point {rp.name!r}: its nodes touch no deformable element "
+                                     f"and no contact, so nothing resists its motion")
+            jr = (w * ((self.model.nodes[rp.nodes] - rp.position) ** 2).sum(axis=1)).sum()
+            rpminv[p, :3] = 1.0 / mt
+            rpminv[p, 3:] = 1.0 / max(jr, 1e-300)
+            rpradius[p] = np.sqrt(max(jr / mt, 1e-300))
+        return 1.0 / fict, rpminv, rpradius
+
+    def _contacts_changed(self):
+        """After :mod:`dr_masonry.sliding` re-paired points: the gather's node map, the masses,
+        the faces of the overhang check, the rows of the contact reactions and the coarse
+        operator follow the new set."""
+        from .contact_search import master_sides
+        c, d, m = self.cont, self.dyn, self.model
+        ptr, rows = node_row_map(np.column_stack([c.slave, c.master]), m.n_nodes)
+        c.ptr[:], c.rows[:] = ptr, rows
+        minv, rpminv, rpradius = self._masses(self._rowsum())
+        d.minv[:], d.rpminv[:], d.rpradius[:] = minv, rpminv, rpradius
+        sides = master_sides(m, self.sliding.contact_set())
+        new = np.any(sides != self._sides, axis=1)
+        self._sides = sides
+        self._overhang0[new] = 0.0
+        q = m.nodes[sides[new]]
+        self._side_size[new] = np.linalg.norm(q[:, [1, 2, 3, 0]] - q, axis=2).min(axis=1)
+        blocks = self.sliding.blocks
+        for name, (blk, sup) in self._reaction_blocks.items():
+            a, b = np.isin(blocks, blk), np.isin(blocks, sup)
+            self.contact_reactions[name] = (np.nonzero(a[:, 1] & b[:, 0])[0],
+                                            np.nonzero(a[:, 0] & b[:, 1])[0])
+        self.coarse = None
 
     # ------------------------------------------------------------------ patterns
     def _pattern(self, pat):
@@ -805,8 +860,9 @@ class Simulation:
         wd = mesh.wdet.sum(axis=1)
         vol = mesh.wdet
         d_blocks = float((mesh.s_old[:, :, MS_DISS] * vol).sum())
-        d_joints = float(cont.s_old[:, JS_DISS] @ cont.area) if cont.slave.size else 0.0
-        d_friction = float(cont.s_old[:, JS_DISSF] @ cont.area) if cont.slave.size else 0.0
+        off = self.sliding.diss_off if self.sliding is not None else np.zeros(2)
+        d_joints = float(cont.s_old[:, JS_DISS] @ cont.area + off[0]) if cont.slave.size else 0.0
+        d_friction = float(cont.s_old[:, JS_DISSF] @ cont.area + off[1]) if cont.slave.size else 0.0
         w_ext = self.energy["W_ext"]
         err = w_ext - eint - d_blocks - d_joints
         self.increment += 1
@@ -834,6 +890,9 @@ class Simulation:
             f = fb[sl, 0].sum(axis=0) + fb[ms, 1:].sum(axis=(0, 1))
             for k in range(3):
                 row[f"{name}.f{'xyz'[k]}"] = float(f[k])
+        # finite sliding: re-pair for the next increment (this row's forces are those above)
+        row["contacts_moved"] = self.sliding.update() if self.sliding is not None else 0
+        row["contacts_off"] = int((cont.area == 0.0).sum())
         self._cut_work = [0, 0.0]
         for key, v in row.items():
             self.history.setdefault(key, [np.nan] * (self.increment - 1)).append(float(v))
@@ -855,19 +914,21 @@ class Simulation:
         if cont.slave.size == 0:
             return 0.0
         ov = np.maximum(overhang(self.dyn.X + self.dyn.U, cont.slave, self._sides)
-                        - self._overhang0, 0.0)
+                        - self._overhang0, 0.0) * (cont.area > 0.0)   # not the points off a face
         k = int(np.argmax(ov / self._side_size))
         if ov[k] > OVERHANG_WARN * self._side_size[k] and "overhang" not in self._warned:
             import warnings
             self._warned.add("overhang")
             node = int(cont.slave[k])
+            why = ("no other face is under it, so it still pushes on that face until it is half an "
+                   "element beyond it, then on nothing" if self.sliding is not None else
+                   "contact points are paired in the reference configuration "
+                   "(SolverOptions.redetect=False), so such a node still pushes on that face")
             warnings.warn(f"increment {self.increment}: joint node {node} (block "
                           f"{self.model.node_block[node]}) has slid {ov[k] * 1e3:.3g} mm off the face "
                           f"of block {self.model.node_block[cont.master[k, 0]]} "
-                          f"({ov[k] / self._side_size[k]:.0%} of its shortest edge): contact "
-                          f"points are paired in the reference configuration, so such a node "
-                          f"still pushes on that face; joint forces near the block ends are "
-                          f"approximate from here on", RuntimeWarning)
+                          f"({ov[k] / self._side_size[k]:.0%} of its shortest edge): {why}; joint "
+                          f"forces near the block ends are approximate from here on", RuntimeWarning)
         return float(ov.max())
 
     def _audit(self, row):
@@ -899,7 +960,10 @@ class Simulation:
 
     def _write_frame(self):
         if self.writer is not None:
-            self.writer.write_frame(self.increment, self.fields(), {"stage": self.stage_name})
+            sl = self.sliding
+            self.writer.write_frame(self.increment, self.fields(), {"stage": self.stage_name},
+                                    contacts=sl.contact_set() if sl is not None and sl.changed
+                                    else None)
             self._write_checkpoint()
 
     # ------------------------------------------------------------------ restart
@@ -920,6 +984,8 @@ class Simulation:
         arrays.update(rp_force=self.rp_force, lam=self.lam, f_prev=self.f_prev,
                       s_blocks=self.mesh.s_old, s_joints=self.cont.s_old,
                       du_prev=self.du_prev if self.du_prev is not None else np.zeros(0))
+        if self.sliding is not None:
+            arrays.update(self.sliding.state())
         meta = {"values": [[list(k), v] for k, v in self.values.items()],
                 "factors": self.factors, "energy": self.energy, "dctl_prev": self.dctl_prev,
                 "history": {k: v for k, v in self.history.items()}, "patterns": [],
@@ -963,6 +1029,8 @@ class Simulation:
         self.mesh.s_new[:] = arrays["s_blocks"]
         self.cont.s_old[:] = arrays["s_joints"]
         self.cont.s_new[:] = arrays["s_joints"]
+        if self.sliding is not None:
+            self.sliding.restore(arrays)
         self.du_prev = arrays["du_prev"] if arrays["du_prev"].size else None
         self.values = {tuple(k): v for k, v in meta["values"]}
         self.factors = dict(meta["factors"])
