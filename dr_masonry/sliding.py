@@ -23,12 +23,12 @@ import numpy as np
 from .contact_search import ContactSet, project_bilinear, redetect
 from .kernels.joint_law import JS_DISS, JS_DISSF
 
-#: how far (natural coordinates beyond +-1: 0.2 is 10 % of the quad's edge) a slave node must
+#: how far (natural coordinates beyond +-1: 0.1 is 5 % of the quad's edge) a slave node must
 #: have slid out of its quad before its point is re-paired. Nodes that start on the edge between
 #: two quads (most of them) would otherwise switch back and forth at every micro-slip, and each
 #: switch moves forces between the quads' nodes: on the S6 wall five such switches at its peak
 #: sent the post-peak path elsewhere at three times the iterations (BENCHMARKS.md, section 21)
-SWITCH = 0.2
+SWITCH = 0.1
 
 
 class Sliding:
