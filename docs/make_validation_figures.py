@@ -40,6 +40,8 @@ def scene_of(r):
         return "terraced_house"
     if "target" in r.config:
         return "out_of_plane_wall"
+    if r.config.get("height", 0.0) > 2.0 * r.config.get("length", np.inf):
+        return "slender_wall"   # the slender wall runs the squat wall's builder and parameters
     return "squat_wall"
 
 
