@@ -13,8 +13,9 @@ them are solved for at once,
 
 with ``T`` the interpolation of the coarse DOFs at the nodes and ``K`` the stiffness of the
 current state: the blocks' elastic strain energy of affine motions (exact for trilinear
-hexahedra; softened by the block's mean damage) and the joints' secant stiffnesses at each
-contact point (slave node against master point). Dynamic relaxation then only has to remove what
+hexahedra; softened by the block's mean damage) and the joints' stiffnesses at each contact
+point (slave node against master point): secant where the point softens or slides in the current
+trial state, elastic unloading elsewhere. Dynamic relaxation then only has to remove what
 the affine blocks cannot represent, local and fast: a two-level method with relaxation as the
 smoother. The operator is factorised once per increment (sparse LU). A step is accepted only if
 it lowers the total potential energy of the trial state (halved twice before giving up; the
@@ -34,6 +35,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from .kernels import relaxation as R
+from .kernels.joint_law import JS_D, JS_DP1, JS_DP2
 from .kernels.plastic_damage import MS_DC, MS_DT
 
 #: coarse DOFs of a block (affine motion u = a + B (X - c)) and of a reference point (rigid)
@@ -143,7 +145,7 @@ class BlockCoarse:
     def matrix(self, gblock, nbg, dof, ndof):
         """Galerkin coarse stiffness T^T K T (csr, ndof square): the blocks' strain energy of
         affine motions (elastic, scaled by the block's mean integrity) and the joints' current
-        secant stiffnesses."""
+        stiffnesses (secant where they soften or slide, unloading elsewhere)."""
         sim = self.sim
         d, c, mesh = sim.dyn, sim.cont, sim.mesh
         X = d.X
@@ -180,14 +182,23 @@ class BlockCoarse:
             xm = np.matmul(N[:, None, :], X[c.master])[:, 0]
             gs, ds = self._group_of(c.slave, X[c.slave], gblock, nbg)
             gm, dm = self._group_of(c.master[:, 0], xm, gblock, nbg)
-            # secant stiffness of each point (N/m); closed or untouched points take the
-            # compression stiffness (a joint under load is mostly compressed)
+            # normal: secant stiffness of each point (N/m), which is also its unloading stiffness
+            # ((1 - D) knn open, the penalty closed); untouched points take the compression
+            # stiffness (a joint under load is mostly compressed)
             gap, tr = c.gaps, c.trac
             un = np.where(gap[:, 0] == 0.0, 1.0, gap[:, 0])
             kn = np.where(np.abs(gap[:, 0]) > 1e-12, tr[:, 0] / un, self.kc_el)
+            # tangential: the secant where the point slides or softens in the current trial state
+            # (its tangent is near zero there); elsewhere kss, the stiffness with which a point
+            # that slid before sticks or unloads (the law's slider keeps its slip). With the
+            # secant everywhere, most post-peak S5 increments gave the correction up after two
+            # rejections (a step rejected at a quarter of its length met over 8 x the stiffness
+            # the operator assumed): BENCHMARKS.md section 22
             slip = np.hypot(gap[:, 1], gap[:, 2])
-            kt = np.where(slip > 1e-12, np.hypot(tr[:, 1], tr[:, 2]) / np.maximum(slip, 1e-300),
-                          self.kt_el)
+            moving = ((c.s_new[:, JS_D] > c.s_old[:, JS_D]) | (c.s_new[:, JS_DP1] != c.s_old[:, JS_DP1])
+                      | (c.s_new[:, JS_DP2] != c.s_old[:, JS_DP2]))
+            kt = np.where(moving & (slip > 1e-12),
+                          np.hypot(tr[:, 1], tr[:, 2]) / np.maximum(slip, 1e-300), self.kt_el)
             kn = np.clip(kn, 0.0, None) * c.area
             kt = np.clip(kt, 0.0, None) * c.area
             nrm = self.normal

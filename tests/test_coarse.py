@@ -93,3 +93,31 @@ def test_one_correction_from_rest(kc):
     hist_c = sim.run([stage])
     assert np.abs(sim.dyn.U - exact).max() < 1e-3 * np.abs(exact).max()
     assert hist_c["iterations"][0] < 0.3 * hist["iterations"][0]
+
+
+def test_joint_stiffness_secant_only_where_it_slides():
+    """A block on a fixed foundation, every joint point closed with slip 1 mm under tau = 0.2 MPa:
+    the coarse stiffness of the block's x translation is kss A (the unloading stiffness) while the
+    points stick, and the secant tau / slip A once the trial state slides (plastic slip moving)."""
+    from dr_masonry.kernels.joint_law import JS_DP1
+    m = Model()
+    m.set_joint_law(JointLaw.dry(0.6))
+    mat = PlasticDamage.elastic(10e9, 0.2, 2000.0)
+    m.add_box((0.0, 0.0, -0.1), (0.2, 0.1, 0.1), mat, (2, 1, 1), fixed=True)
+    blk = m.add_box((0.0, 0.0, 0.0), (0.2, 0.1, 0.1), mat, (4, 1, 1))
+    sim = Simulation(m)
+    sim.build()
+    c = sim.cont
+    c.gaps[:] = [-1e-6, 1e-3, 0.0]
+    c.trac[:] = [-1e5, 2e5, 0.0]
+    co = BlockCoarse(sim)
+    g, nbg = co.groups()
+    dof, ndof = co.dof_map(nbg, 0)
+    ix = dof[g[blk], 0]
+    area = c.area.sum()
+    assert area == pytest.approx(0.02)
+    stick = co.matrix(g, nbg, dof, ndof)[ix, ix]
+    assert stick == pytest.approx(m.joint_laws[0].kss * area, rel=1e-12)
+    c.s_new[:, JS_DP1] = c.s_old[:, JS_DP1] + 1e-4
+    slide = co.matrix(g, nbg, dof, ndof)[ix, ix]
+    assert slide == pytest.approx(2e5 / 1e-3 * area, rel=1e-12)
