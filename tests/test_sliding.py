@@ -108,3 +108,8 @@ def test_restart_across_a_repairing(tmp_path):
     r = open_result(path)
     assert r.contacts(-1)["area"].min() == 0.0               # the last frame's own set
     assert r.contacts(0)["area"].min() > 0.0                 # the first: the model's
+    # the VTK series draws every frame with its own set
+    from dr_masonry.viz.vtk_series import export_vtk
+    export_vtk(path, str(tmp_path / "vtk"))
+    assert (tmp_path / "vtk" / "contacts.pvd").exists()
+    assert len(list((tmp_path / "vtk").glob("contacts_*.vtu"))) == len(r.frame_ids)
