@@ -123,7 +123,8 @@ def rig(params, law, block):
     """A wall on a fixed foundation under a stiff steel loading beam (S4, S5, S6).
 
     Uses ``length``, ``height``, ``mesh``, ``beam_height``, ``gravity``, ``sigma``, ``tol``,
-    ``damping``, ``kc_factor`` (the joints' compression penalty, x knn) of ``params``. Returns
+    ``damping``, ``coarse``, ``max_dissipation``, ``redetect`` (finite sliding), ``kc_factor`` (the
+    joints' compression penalty, x knn) of ``params``. Returns
     ``(sim, wall, beam, base, pre)``: the simulation, the :class:`~dr_masonry.geometry.Wall`,
     the beam's reference point (centre of the wall's top face), the foundation's top-face node set
     (reactions ``base.f*``) and the pre-compression controls (gravity and the force ``N`` that
