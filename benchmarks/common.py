@@ -69,13 +69,14 @@ def child_row(script, overrides, env=None):
     return json.loads(res.stdout.strip().splitlines()[-1])
 
 
-def start(defaults, doc, argv, child_mode, child):
+def start(defaults, doc, argv, child_mode=None, child=None):
     """Parameters of a benchmark script's ``main`` (``key=value`` overrides of ``defaults``);
     ``None`` after running ``child(params)`` when ``params["mode"]`` is ``child_mode`` (the
-    script called by itself for one setting), else the parameters with the machine line printed."""
+    script called by itself for one setting), else the parameters with the machine line printed
+    (scripts without such a mode pass neither)."""
     from dr_masonry.params import parse_overrides
     params = parse_overrides(defaults, sys.argv[1:] if argv is None else argv, doc)
-    if params["mode"] == child_mode:
+    if child is not None and params["mode"] == child_mode:
         child(params)
         return None
     print(f"machine: {machine()}")

@@ -15,7 +15,7 @@ import numpy as np
 
 import common
 
-DEFAULTS = dict(scenes="s5,s5fine,s7", repeat=5, noise=1e-4, mode="table")
+DEFAULTS = dict(scenes="s5,s5fine,s7", repeat=5, noise=1e-4)
 SCENES = {"s5": ("squat_wall", {}), "s5fine": ("squat_wall", {"mesh": "fine"}),
           "s7": ("terraced_house", {})}
 
@@ -42,7 +42,7 @@ def row(name, repeat, noise):
 
 
 def main(argv=None):
-    params = common.start(DEFAULTS, __doc__, argv, "child", None)
+    params = common.start(DEFAULTS, __doc__, argv)
     rows = [row(s, params["repeat"], params["noise"]) for s in params["scenes"].split(",")]
     common.report(rows, "sliding", "finite-sliding check per increment")
 

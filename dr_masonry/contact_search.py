@@ -518,11 +518,9 @@ def redetect(model, contacts, x_current, slack=SLIDE_SLACK, reach=None, rows=Non
     if nc == 0:
         return contacts, src
     xs = x[contacts.slave]
-    r, s = project_bilinear(x[contacts.master], xs)
-    out = (np.abs(r) > 1.0 + slack) | (np.abs(s) > 1.0 + slack)
-    if rows is not None:
-        out &= np.asarray(rows, dtype=bool)
-    moved = np.flatnonzero(out)
+    cand = np.arange(nc) if rows is None else np.flatnonzero(np.asarray(rows, dtype=bool))
+    r, s = project_bilinear(x[contacts.master[cand]], xs[cand])
+    moved = cand[(np.abs(r) > 1.0 + slack) | (np.abs(s) > 1.0 + slack)]
     if moved.size == 0:
         return contacts, src
     bs = contacts.blocks[moved, 0]

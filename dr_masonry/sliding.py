@@ -61,10 +61,11 @@ class Sliding:
         r, s = project_bilinear(x[cont.master], x[cont.slave])
         return np.maximum(np.maximum(np.abs(r), np.abs(s)) - 1.0, 0.0)
 
-    def contact_set(self):
-        """The current contact set (areas 0 where a point is off the surface)."""
+    def contact_set(self, area=None):
+        """The current contact set (areas 0 where a point is off the surface, or ``area``)."""
         c = self.sim.cont
-        return ContactSet(c.slave, c.master, c.xi, c.area, c.law, self.blocks, c.gap0)
+        return ContactSet(c.slave, c.master, c.xi, c.area if area is None else area, c.law,
+                          self.blocks, c.gap0)
 
     def update(self):
         """Re-pair the points whose slave node slid off its quad at the current (committed)
@@ -78,9 +79,7 @@ class Sliding:
         cand = (out > self.outside0 + SWITCH) | (cont.area == 0.0)
         if not cand.any():
             return 0
-        full = ContactSet(cont.slave, cont.master, cont.xi, self.area0, cont.law, self.blocks,
-                          cont.gap0)
-        new, src = redetect(sim.model, full, x, rows=cand)
+        new, src = redetect(sim.model, self.contact_set(self.area0), x, rows=cand)
         area = np.zeros_like(self.area0)
         area[src] = new.area
         master, xi, gap0 = cont.master.copy(), cont.xi.copy(), cont.gap0.copy()

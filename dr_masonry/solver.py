@@ -51,6 +51,18 @@ OVERHANG_WARN = 0.05
 JUMP = 0.75
 
 
+def _reaction_rows(pairs, blocks, support):
+    """Contact rows (slave side, master side) by which blocks ``support`` act on ``blocks``,
+    from the (slave block, master block) ``pairs`` (nc, 2) of the contact set."""
+    a, b = np.isin(pairs, blocks), np.isin(pairs, support)
+    return np.nonzero(a[:, 1] & b[:, 0])[0], np.nonzero(a[:, 0] & b[:, 1])[0]
+
+
+def _shortest_edge(q):
+    """Shortest edge (m) of each quad with corners ``q`` (nc, 4, 3)."""
+    return np.linalg.norm(q[:, [1, 2, 3, 0]] - q, axis=2).min(axis=1)
+
+
 class SolverError(RuntimeError):
     """A run stopped: the message says where (increment, node/block) and which quantity."""
 
@@ -218,16 +230,12 @@ class Simulation:
         the joint forces are summed per contact, whatever the meshes of the two sides.
         """
         self._check_name(name)
-        c = self.model.contacts
-        a = np.isin(c.blocks, np.asarray(blocks, dtype=np.int64))
-        b = np.isin(c.blocks, np.asarray(support, dtype=np.int64))
-        on_slave = a[:, 1] & b[:, 0]    # support is the slave side of these contacts
-        on_master = a[:, 0] & b[:, 1]
-        if not (on_slave.any() or on_master.any()):
+        pair = (np.asarray(blocks, dtype=np.int64), np.asarray(support, dtype=np.int64))
+        on_slave, on_master = _reaction_rows(self.model.contacts.blocks, *pair)
+        if not (on_slave.size or on_master.size):
             raise L.LoadingError(f"contact reaction {name!r}: no joint between the two block sets")
-        self.contact_reactions[name] = (np.nonzero(on_slave)[0], np.nonzero(on_master)[0])
-        self._reaction_blocks[name] = (np.asarray(blocks, dtype=np.int64),
-                                       np.asarray(support, dtype=np.int64))
+        self.contact_reactions[name] = (on_slave, on_master)
+        self._reaction_blocks[name] = pair
 
     def _check_name(self, name):
         if name in self.contact_reactions:
@@ -313,8 +321,7 @@ class Simulation:
         from .contact_search import master_sides, overhang
         self._sides = master_sides(m, c)
         self._overhang0 = overhang(m.nodes, c.slave, self._sides)  # partial overlaps at the start
-        q = m.nodes[self._sides]
-        self._side_size = np.linalg.norm(q[:, [1, 2, 3, 0]] - q, axis=2).min(axis=1)
+        self._side_size = _shortest_edge(m.nodes[self._sides])
         # copies: finite sliding re-pairs points in place, ``model.contacts`` stays as detected
         self.cont = Cont(c.slave, c.master.copy(), c.xi.copy(), c.area.copy(), c.law.copy(),
                          lparams, c.gap0.copy(), np.ascontiguousarray(js0), js0.copy(),
@@ -415,13 +422,9 @@ class Simulation:
         new = np.any(sides != self._sides, axis=1)
         self._sides = sides
         self._overhang0[new] = 0.0
-        q = m.nodes[sides[new]]
-        self._side_size[new] = np.linalg.norm(q[:, [1, 2, 3, 0]] - q, axis=2).min(axis=1)
-        blocks = self.sliding.blocks
-        for name, (blk, sup) in self._reaction_blocks.items():
-            a, b = np.isin(blocks, blk), np.isin(blocks, sup)
-            self.contact_reactions[name] = (np.nonzero(a[:, 1] & b[:, 0])[0],
-                                            np.nonzero(a[:, 0] & b[:, 1])[0])
+        self._side_size[new] = _shortest_edge(m.nodes[sides[new]])
+        for name, pair in self._reaction_blocks.items():
+            self.contact_reactions[name] = _reaction_rows(self.sliding.blocks, *pair)
         self.coarse = None
 
     # ------------------------------------------------------------------ patterns
