@@ -175,6 +175,14 @@ class Simulation:
         HDF5 result path (None keeps results in memory only).
     config : dict
         the scene's input parameters, stored in the result file.
+
+    Attributes
+    ----------
+    monitors : list of callables ``monitor(sim, info, done)``, called after every compiled call of
+        the relaxation (at most ``CALL_ITERATIONS`` iterations): ``info`` the kernel's status
+        array (``R.I_RESID``: residual ratio, ``R.I_STATUS``, ...), ``done`` the iterations of the
+        attempt so far (row ``sim.increment + 1``). For diagnostics (``benchmarks/
+        slow_increment.py``); an exception raised by a monitor stops the run, rows so far kept.
     """
 
     def __init__(self, model, options=None, output=None, config=None):
@@ -207,6 +215,7 @@ class Simulation:
         self.increment = 0
         # iterations and relaxation seconds of attempts cut in two since the last committed row
         self._cut_work = [0, 0.0]
+        self.monitors = []
         self._bar = None   # progress bar of a running ``run`` call
         self._bar_t = 0.0  # when its text was last changed within an increment (perf_counter, s)
 
@@ -786,6 +795,8 @@ class Simulation:
             done += k
             info[R.I_SEG] += k
             damped += info[R.I_DAMPED]
+            for monitor in self.monitors:
+                monitor(self, info, done)
             if int(info[R.I_STATUS]) != R.ST_MAXITER or done >= max_iter:
                 break
             if self._bar is not None and time.perf_counter() - self._bar_t > 1.0:

@@ -1,0 +1,128 @@
+"""Why an increment is slow: relax the next row of a stored run under a monitor.
+
+Copies the result file ``file`` of scene ``scene`` and continues it from its checkpoint with the
+parameters stored in it, for ``rows`` committed rows (a cut increment commits one per part), while a
+monitor (``Simulation.monitors``) records the residual ratio after every call of the relaxation
+and the coarse corrections accepted and rejected. From ``probe`` iterations into an attempt it
+also records, every iteration for ``trace`` iterations, the residual of the nodes where it is
+largest, and reports:
+
+* how concentrated the residual is (share of its square in the top 1 % of the nodes; the blocks
+  holding most of it),
+* whether the motion is a steady creep (cosine between the displacement changes of the two
+  halves of the trace: near 1 for a slow mode relaxing),
+* whether the worst nodes ring (sign changes of their residual over the trace, and the period
+  in iterations).
+
+The relaxation runs in calls of ``check_every`` = 1 iteration from the start (the iterates are
+those of the stored run; an attempt may stop up to 9 iterations earlier than it would have with
+checks every 10). Run: ``python benchmarks/slow_increment.py file=results/terraced_house.h5
+scene=terraced_house [rows=1 probe=20000 trace=60]``; writes ``benchmarks/out/
+slow_increment.csv`` (residual ratio per call). BENCHMARKS.md section 25.
+"""
+import os
+import shutil
+
+import numpy as np
+
+import common
+
+DEFAULTS = dict(file="", scene="", rows=1, probe=20000, trace=60, top=5)
+
+
+class _Done(Exception):
+    """The rows asked for are relaxed."""
+
+
+class Monitor:
+    """Residual ratio per call, coarse corrections, and the probe of one attempt."""
+
+    def __init__(self, sim, rows, probe, trace, top):
+        self.last_row = sim.increment + rows
+        self.probe, self.trace, self.top = probe, trace, top
+        self.calls = []        # (row, iterations of the attempt, residual ratio, status)
+        self.nodes = None      # probed nodes; their residual per traced iteration
+        self.res, self.u = [], []
+        self.report = None
+
+    def __call__(self, sim, info, done):
+        from dr_masonry.kernels import relaxation as R
+        if sim.increment >= self.last_row:
+            raise _Done
+        if self.calls and done < self.calls[-1][1] and self.report is None:
+            self.nodes, self.res, self.u = None, [], []   # a new attempt: probe that one
+        self.calls.append((sim.increment + 1, done, float(info[R.I_RESID]), int(info[R.I_STATUS])))
+        d = sim.dyn
+        if self.report is None and done >= self.probe:
+            r = d.res * d.free
+            if self.nodes is None:
+                self.nodes = np.argsort(-np.linalg.norm(r, axis=1))[:self.top]
+                self.u = [d.U.copy()]
+            self.res.append(r[self.nodes].copy())
+            if len(self.res) == self.trace // 2:
+                self.u.append(d.U.copy())
+            if len(self.res) >= self.trace:
+                self.u.append(d.U.copy())
+                self.report = self._analyse(sim, r)
+
+    def _analyse(self, sim, r):
+        """The probe's findings as a dict (table row)."""
+        rn2 = (r ** 2).sum(axis=1)
+        share = np.sort(rn2)[::-1][:max(1, rn2.size // 100)].sum() / rn2.sum()
+        blocks = np.bincount(sim.model.node_block, weights=rn2, minlength=sim.model.n_blocks)
+        worst = np.argsort(-blocks)[:3]
+        a, b = self.u[1] - self.u[0], self.u[2] - self.u[1]
+        creep = float((a * b).sum() / max(np.linalg.norm(a) * np.linalg.norm(b), 1e-300))
+        tr = np.asarray(self.res)                      # (trace, top, 3)
+        k = np.argmax(np.abs(tr).max(axis=0), axis=1)  # each node's largest component
+        comp = tr[:, np.arange(self.top), k]           # (trace, top)
+        flips = (np.diff(np.sign(comp), axis=0) != 0).sum(axis=0)
+        period = 2.0 * (tr.shape[0] - 1) / max(int(flips.max()), 1)
+        return dict(row=sim.increment + 1, at_iteration=self.probe,
+                    top1pct_share=float(share),
+                    worst_blocks=" ".join(f"{b}:{blocks[b] / rn2.sum():.2f}" for b in worst),
+                    creep_cosine=creep, worst_nodes=" ".join(map(str, self.nodes)),
+                    sign_changes=" ".join(map(str, flips)), ringing_period=period,
+                    amplitude_N=float(np.abs(comp).max()))
+
+
+def main(argv=None):
+    params = common.start(DEFAULTS, __doc__, argv)
+    from dr_masonry.cli import import_case
+    from dr_masonry.params import ParameterError
+    from dr_masonry.results import open_result
+    import dr_masonry.solver as S
+    if not os.path.isfile(params["file"]):
+        raise ParameterError(f"parameter file={params['file']!r}: no such result file")
+    mod = import_case(params["scene"])
+    os.makedirs(common.OUT, exist_ok=True)
+    copy = os.path.join(common.OUT, "slow_increment.h5")
+    shutil.copy(params["file"], copy)
+    stored = open_result(copy).config
+    run = dict(stored, h5=copy, progress=False)
+    sim, stages = mod.build(run)
+    sim.options.check_every = 1
+    S.CALL_ITERATIONS = 1
+    sim.resume(copy)
+    mon = Monitor(sim, params["rows"], params["probe"], params["trace"], params["top"])
+    sim.monitors.append(mon)
+    coarse0 = (0, 0)
+    try:
+        sim.run(stages)
+    except _Done:
+        pass
+    if sim.coarse is not None:
+        coarse0 = (sim.coarse.n_corrections - sim.coarse.n_rejected, sim.coarse.n_rejected)
+    calls = [dict(row=c[0], iterations=c[1], residual_ratio=c[2], status=c[3])
+             for c in mon.calls if c[1] % 2000 == 0 or c[3] != 1]
+    common.report(calls, "slow_increment", f"residual ratio every 2,000 iterations and at each "
+                  f"attempt's end ({params['scene']}, from {params['file']})")
+    print(f"\ncoarse corrections accepted {coarse0[0]}, rejected {coarse0[1]}")
+    if mon.report is not None:
+        common.report([mon.report], "slow_increment_probe", "where the residual sits")
+    else:
+        print(f"(no attempt reached {params['probe']} iterations: nothing probed)")
+
+
+if __name__ == "__main__":
+    main()
