@@ -94,6 +94,9 @@ def main(argv=None):
     import dr_masonry.solver as S
     if not os.path.isfile(params["file"]):
         raise ParameterError(f"parameter file={params['file']!r}: no such result file")
+    for key, low in (("rows", 1), ("probe", 0), ("trace", 2), ("top", 1)):
+        if params[key] < low:
+            raise ParameterError(f"parameter {key}={params[key]!r}: must be >= {low}")
     mod = import_case(params["scene"])
     os.makedirs(common.OUT, exist_ok=True)
     copy = os.path.join(common.OUT, "slow_increment.h5")
