@@ -6,18 +6,19 @@ import pytest
 from dr_masonry import Displacement, Gravity, JointLaw, Load, Model, PlasticDamage
 from dr_masonry import Simulation, SolverOptions, Stage
 from dr_masonry.kernels import relaxation as R
+from dr_masonry.results import open_result
 import dr_masonry.solver as S
 
 MAT = PlasticDamage.elastic(10e9, 0.2, 2000.0)
 
 
-def setup(max_iter=200_000):
+def setup(output=None):
     """A block on a fixed one, gravity then a lateral push of its top (cohesive joint)."""
     m = Model()
     m.set_joint_law(JointLaw.reference())
     m.add_box((0.0, 0.0, -0.1), (0.2, 0.1, 0.1), MAT, (2, 1, 1), fixed=True)
     blk = m.add_box((0.0, 0.0, 0.0), (0.2, 0.1, 0.1), MAT, (2, 1, 1))
-    sim = Simulation(m, SolverOptions(tol=1e-6, max_iter=max_iter, coarse=False))
+    sim = Simulation(m, SolverOptions(tol=1e-6, coarse=False), output=output)
     nodes = m.block_nodes(blk)
     rp = sim.rigid_point("top", nodes=nodes[np.isclose(m.nodes[nodes, 2], 0.1)])
     stages = [Stage("gravity", 1, [Load(pattern=Gravity(), to=1.0)]),
@@ -43,8 +44,9 @@ def test_monitor_sees_every_call_of_every_row(monkeypatch):
     assert all(len([c for c in calls if c[0] == r]) > 1 for r in range(1, 6))
 
 
-def test_a_monitor_stops_the_run_and_the_rows_so_far_stay():
-    sim, stages = setup()
+def test_a_monitor_stops_the_run_and_the_rows_so_far_stay(tmp_path):
+    path = str(tmp_path / "stopped.h5")
+    sim, stages = setup(path)
 
     class Enough(Exception):
         pass
@@ -57,4 +59,5 @@ def test_a_monitor_stops_the_run_and_the_rows_so_far_stay():
     with pytest.raises(Enough):
         sim.run(stages)
     assert sim.increment == 2
-    assert np.asarray(sim.history["increment"]).tolist() == [1.0, 2.0]
+    sim.close()
+    assert np.asarray(open_result(path).history["increment"]).tolist() == [1.0, 2.0]
