@@ -70,6 +70,8 @@ PARAMS = dict(
     coarse=True,            # two-level relaxation (SolverOptions.coarse)
     max_dissipation=0.0,    # load-step control (SolverOptions.max_dissipation; 0: off)
     redetect=True,          # finite sliding of the joints (SolverOptions.redetect)
+    max_iter=200_000,       # iteration cap of an increment before it is cut (SolverOptions)
+    max_cuts=4,             # halvings of an increment before the run stops (SolverOptions)
     frames=5,               # write a field frame every this many increments
     resume=False,           # continue the run stored in out.h5 from its last checkpoint
     fast=False,             # preset FAST: tiny 0.88 x 0.81 m coarse wall, few increments
@@ -123,7 +125,8 @@ def rig(params, law, block):
     """A wall on a fixed foundation under a stiff steel loading beam (S4, S5, S6).
 
     Uses ``length``, ``height``, ``mesh``, ``beam_height``, ``gravity``, ``sigma``, ``tol``,
-    ``damping``, ``coarse``, ``max_dissipation``, ``redetect`` (finite sliding), ``kc_factor`` (the
+    ``damping``, ``coarse``, ``max_dissipation``, ``redetect`` (finite sliding), ``max_iter``,
+    ``max_cuts`` (the solver's caps), ``kc_factor`` (the
     joints' compression penalty, x knn) of ``params``. Returns
     ``(sim, wall, beam, base, pre)``: the simulation, the :class:`~dr_masonry.geometry.Wall`,
     the beam's reference point (centre of the wall's top face), the foundation's top-face node set
@@ -148,6 +151,8 @@ def rig(params, law, block):
                                           coarse=params["coarse"],
                                           max_dissipation=params["max_dissipation"],
                                           redetect=params["redetect"],
+                                          max_iter=params["max_iter"],
+                                          max_cuts=params["max_cuts"],
                                           progress=params.get("progress", False)),
                      output=params.get("h5"), config=params)
     beam = sim.rigid_point("beam", blocks=[beam_block], position=(0.5 * L, 0.5 * t, H))

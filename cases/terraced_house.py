@@ -65,6 +65,8 @@ PARAMS = dict(
     coarse=True,            # two-level relaxation (SolverOptions.coarse)
     max_dissipation=0.0,    # load-step control (SolverOptions.max_dissipation; 0: off)
     redetect=True,          # finite sliding of the joints (SolverOptions.redetect)
+    max_iter=200_000,       # iteration cap of an increment before it is cut (SolverOptions)
+    max_cuts=4,             # halvings of an increment before the run stops (SolverOptions)
     frames=5,               # write a field frame every this many increments
     resume=False,           # continue the run stored in out.h5 from its last checkpoint
     fast=False,             # preset FAST: small coarse house of large blocks, few increments
@@ -113,6 +115,8 @@ def build(params):
                                           coarse=params["coarse"],
                                           max_dissipation=params["max_dissipation"],
                                           redetect=params["redetect"],
+                                          max_iter=params["max_iter"],
+                                          max_cuts=params["max_cuts"],
                                           progress=params.get("progress", False)),
                      output=params.get("h5"), config=params)
     floors = [sim.rigid_point(f"floor{i + 1}", blocks=groups[f"slabs_floor{i + 1}"])

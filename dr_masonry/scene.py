@@ -20,7 +20,7 @@ def scene_params(defaults, fast, argv, doc):
 
 #: parameters that may differ when a run is continued: how it is solved and written, not what
 SOLVER_KEYS = {"resume", "progress", "out", "h5", "frames", "tol", "damping", "coarse", "solver",
-               "max_dissipation", "redetect"}
+               "max_dissipation", "redetect", "max_iter", "max_cuts"}
 
 
 def with_penalty(law, factor):
