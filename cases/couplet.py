@@ -13,10 +13,9 @@ import sys
 
 import numpy as np
 
-from dr_masonry import (Displacement, JointLaw, Model, PlasticDamage, Simulation, SolverOptions,
-                        Stage)
+from dr_masonry import Displacement, JointLaw, Model, PlasticDamage, Simulation, Stage
 from dr_masonry.params import parse_overrides
-from dr_masonry.scene import finish
+from dr_masonry.scene import finish, solver_options
 from dr_masonry.units import MPa, mm
 
 PARAMS = dict(
@@ -41,9 +40,7 @@ def build(params):
     div = (params["nx"], params["ny"], params["nz"])
     bottom = model.add_box((0, 0, 0), (L, T, H), brick, div)
     top = model.add_box((0, 0, H), (L, T, H), brick, div)
-    sim = Simulation(model, SolverOptions(tol=params["tol"], damping=params["damping"],
-                                   progress=params.get("progress", False)),
-                     output=params.get("h5"), config=params)
+    sim = Simulation(model, solver_options(params), output=params.get("h5"), config=params)
     base = model.block_nodes(bottom)
     sim.fix(base[np.isclose(model.nodes[base, 2], 0.0)])
     platen = model.block_nodes(top)

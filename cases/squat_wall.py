@@ -38,13 +38,14 @@ import sys
 import numpy as np
 
 from dr_masonry import (Displacement, Force, JointLaw, Load, Model, PlasticDamage, Simulation,
-                        SolverOptions, Stage)
+                        Stage)
 from dr_masonry.geometry import BrickSpec, add_beam, add_foundation, add_wall, plane_nodes
 from dr_masonry.loading import Gravity
 from dr_masonry.materials.joint import KC_PEN_FACTOR
 from dr_masonry.params import ParameterError
 from dr_masonry.protocols import S5
-from dr_masonry.scene import finish, run_stages, scene_params, solver_summary, with_penalty
+from dr_masonry.scene import (finish, run_stages, scene_params, solver_options, solver_summary,
+                              with_penalty)
 from dr_masonry.units import MPa, kN, mm
 
 PARAMS = dict(
@@ -124,10 +125,9 @@ def materials(variant="reference", shear_damage="calibrated"):
 def rig(params, law, block):
     """A wall on a fixed foundation under a stiff steel loading beam (S4, S5, S6).
 
-    Uses ``length``, ``height``, ``mesh``, ``beam_height``, ``gravity``, ``sigma``, ``tol``,
-    ``damping``, ``coarse``, ``max_dissipation``, ``redetect`` (finite sliding), ``max_iter``,
-    ``max_cuts`` (the solver's caps), ``kc_factor`` (the
-    joints' compression penalty, x knn) of ``params``. Returns
+    Uses ``length``, ``height``, ``mesh``, ``beam_height``, ``gravity``, ``sigma``, the
+    solver options (``scene.OPTION_KEYS``), ``kc_factor`` (the joints' compression penalty, x knn)
+    of ``params``. Returns
     ``(sim, wall, beam, base, pre)``: the simulation, the :class:`~dr_masonry.geometry.Wall`,
     the beam's reference point (centre of the wall's top face), the foundation's top-face node set
     (reactions ``base.f*``) and the pre-compression controls (gravity and the force ``N`` that
@@ -147,14 +147,7 @@ def rig(params, law, block):
     fnd = add_foundation(model, (0, 0, -0.2), (L, t, 0.2), CONCRETE, element_size=esize)
     hb = params["beam_height"]
     beam_block = add_beam(model, (0, 0, H), (L, t, hb), STEEL, element_size=esize)
-    sim = Simulation(model, SolverOptions(tol=params["tol"], damping=params["damping"],
-                                          coarse=params["coarse"],
-                                          max_dissipation=params["max_dissipation"],
-                                          redetect=params["redetect"],
-                                          max_iter=params["max_iter"],
-                                          max_cuts=params["max_cuts"],
-                                          progress=params.get("progress", False)),
-                     output=params.get("h5"), config=params)
+    sim = Simulation(model, solver_options(params), output=params.get("h5"), config=params)
     beam = sim.rigid_point("beam", blocks=[beam_block], position=(0.5 * L, 0.5 * t, H))
     base = sim.node_set("base", plane_nodes(model, 2, 0.0, blocks=[fnd]))
     g = Gravity()

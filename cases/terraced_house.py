@@ -39,13 +39,14 @@ from dataclasses import replace
 import numpy as np
 
 from dr_masonry import (Combined, Displacement, Indirect, JointLaw, Load, Model, PlasticDamage,
-                        PointLoad, Simulation, SolverOptions, Stage)
+                        PointLoad, Simulation, Stage)
 from dr_masonry.geometry import BrickSpec, HouseParams, terraced_house
 from dr_masonry.loading import Gravity
 from dr_masonry.materials.joint import KC_PEN_FACTOR
 from dr_masonry.params import ParameterError
 from dr_masonry.protocols import S7
-from dr_masonry.scene import finish, run_stages, scene_params, solver_summary, with_penalty
+from dr_masonry.scene import (finish, run_stages, scene_params, solver_options, solver_summary,
+                              with_penalty)
 from dr_masonry.units import kN, mm
 
 PARAMS = dict(
@@ -111,14 +112,7 @@ def build(params):
     model.set_joint_law(with_penalty(JointLaw.reference(), params["kc_factor"]))
     slab = CONCRETE.with_changes(density=CONCRETE.density * hp.slab_thickness / lay.slab_thickness)
     groups = terraced_house(model, hp, PlasticDamage.reference(), CONCRETE, slab)
-    sim = Simulation(model, SolverOptions(tol=params["tol"], damping=params["damping"],
-                                          coarse=params["coarse"],
-                                          max_dissipation=params["max_dissipation"],
-                                          redetect=params["redetect"],
-                                          max_iter=params["max_iter"],
-                                          max_cuts=params["max_cuts"],
-                                          progress=params.get("progress", False)),
-                     output=params.get("h5"), config=params)
+    sim = Simulation(model, solver_options(params), output=params.get("h5"), config=params)
     floors = [sim.rigid_point(f"floor{i + 1}", blocks=groups[f"slabs_floor{i + 1}"])
               for i in range(hp.n_storeys)]
     tied = np.concatenate([f.nodes for f in floors])

@@ -15,10 +15,10 @@ import sys
 import numpy as np
 
 from dr_masonry import (Displacement, Force, JointLaw, Model, PlasticDamage, Simulation,
-                        SolverOptions, Stage)
+                        Stage)
 from dr_masonry.geometry import plane_nodes
 from dr_masonry.params import parse_overrides
-from dr_masonry.scene import finish
+from dr_masonry.scene import finish, solver_options
 from dr_masonry.units import MPa, mm
 
 PARAMS = dict(
@@ -41,8 +41,7 @@ def build(params, sigma):
     brick = PlasticDamage.reference()
     div = (params["nx"], params["ny"], params["nz"])
     b = [model.add_box((0, 0, k * H), (L, T, H), brick, div) for k in range(3)]
-    sim = Simulation(model, SolverOptions(tol=params["tol"], damping=params["damping"],
-                                   progress=params.get("progress", False)),
+    sim = Simulation(model, solver_options(params),
                      output=params.get("h5"), config=dict(params, sigma=sigma))
     base = plane_nodes(model, 2, 0.0, blocks=[b[0]])
     sim.fix(base, "z")

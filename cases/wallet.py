@@ -13,10 +13,10 @@ import sys
 
 import numpy as np
 
-from dr_masonry import Displacement, JointLaw, Model, PlasticDamage, Simulation, SolverOptions, Stage
+from dr_masonry import Displacement, JointLaw, Model, PlasticDamage, Simulation, Stage
 from dr_masonry.geometry import BrickSpec, add_wall, plane_nodes
 from dr_masonry.params import parse_overrides
-from dr_masonry.scene import finish
+from dr_masonry.scene import finish, solver_options
 from dr_masonry.units import MPa, kN, mm
 
 PARAMS = dict(
@@ -40,9 +40,7 @@ def build(params):
     brick = BrickSpec(nx_along=params["nx"], ny_thick=params["ny"], nz_height=params["nz"])
     wall = add_wall(model, (0, 0, 0), 2 * brick.length, 5 * brick.height,
                     PlasticDamage.reference(), brick=brick)
-    sim = Simulation(model, SolverOptions(tol=params["tol"], damping=params["damping"],
-                                   progress=params.get("progress", False)),
-                     output=params.get("h5"), config=params)
+    sim = Simulation(model, solver_options(params), output=params.get("h5"), config=params)
     base = plane_nodes(model, 2, 0.0)
     sim.fix(base, "z")
     sim.fix(base[:1], "xy")                       # no rigid-body motion in the plane

@@ -18,9 +18,18 @@ def scene_params(defaults, fast, argv, doc):
     return params
 
 
+#: scene parameters that are :class:`SolverOptions` fields of the same name
+OPTION_KEYS = ("tol", "damping", "coarse", "max_dissipation", "redetect", "max_iter", "max_cuts")
 #: parameters that may differ when a run is continued: how it is solved and written, not what
-SOLVER_KEYS = {"resume", "progress", "out", "h5", "frames", "tol", "damping", "coarse", "solver",
-               "max_dissipation", "redetect", "max_iter", "max_cuts"}
+SOLVER_KEYS = {"resume", "progress", "out", "h5", "frames", "solver", *OPTION_KEYS}
+
+
+def solver_options(params):
+    """The :class:`SolverOptions` of a scene: its ``OPTION_KEYS`` parameters (those it has) and
+    the progress bar."""
+    from .solver import SolverOptions
+    return SolverOptions(**{k: params[k] for k in OPTION_KEYS if k in params},
+                         progress=params.get("progress", False))
 
 
 def with_penalty(law, factor):
