@@ -102,25 +102,25 @@ def main(argv=None):
     copy = os.path.join(common.OUT, "slow_increment.h5")
     shutil.copy(params["file"], copy)
     stored = open_result(copy).config
-    run = dict(stored, h5=copy, progress=False)
+    run = {**mod.PARAMS, **stored, "h5": copy, "progress": False}  # keys newer than the file: defaults
     sim, stages = mod.build(run)
     sim.options.check_every = 1
     S.CALL_ITERATIONS = 1
     sim.resume(copy)
     mon = Monitor(sim, params["rows"], params["probe"], params["trace"], params["top"])
     sim.monitors.append(mon)
-    coarse0 = (0, 0)
+    counts = (0, 0)
     try:
         sim.run(stages)
     except _Done:
         pass
     if sim.coarse is not None:
-        coarse0 = (sim.coarse.n_corrections - sim.coarse.n_rejected, sim.coarse.n_rejected)
+        counts = (sim.coarse.n_corrections - sim.coarse.n_rejected, sim.coarse.n_rejected)
     calls = [dict(row=c[0], iterations=c[1], residual_ratio=c[2], status=c[3])
              for c in mon.calls if c[1] % 2000 == 0 or c[3] != 1]
     common.report(calls, "slow_increment", f"residual ratio every 2,000 iterations and at each "
                   f"attempt's end ({params['scene']}, from {params['file']})")
-    print(f"\ncoarse corrections accepted {coarse0[0]}, rejected {coarse0[1]}")
+    print(f"\ncoarse corrections accepted {counts[0]}, rejected {counts[1]}")
     if mon.report is not None:
         common.report([mon.report], "slow_increment_probe", "where the residual sits")
     else:
