@@ -59,7 +59,7 @@ def child(params):
 
     def iterations():
         info[:] = 0.0
-        R.relax(m, c, d, sim.lam, np.zeros(3, np.int64), 1.0, R.DAMP_VISCOUS, o.alpha, 0.0,
+        R.relax(m, c, d, sim.lam, np.zeros(3, np.int64), 1.0, R.DAMP_VISCOUS, o.alpha, o.ring, 0.0,
                 sim.ref_floor, n, o.check_every, 0, 0.5 * sim.size, info)
 
     def pieces(f):

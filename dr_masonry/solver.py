@@ -29,9 +29,10 @@ Energies = namedtuple("Energies", "stored f_tot dw ratio diss")
 #: (n_nodes,) reference point or -1, fext constant loads N, P indirect pattern N per unit factor,
 #: fint internal forces N, res out-of-balance N; reference points (n_rp, 6) rpU/rpV/rpminv/rpfree,
 #: rpf applied and rpP pattern generalised forces, rpX (n_rp, 3) m, rpptr/rpnodes CSR of tied
-#: nodes, rpradius (n_rp,) m radius of gyration (moment scale)
+#: nodes, rpradius (n_rp,) m radius of gyration (moment scale); ring (n_nodes, 3) velocity-reversal
+#: counts of the ring damping (``R.relax``)
 Dyn = namedtuple("Dyn", "X U V minv free tied fext P fint res rpX rpU rpV rpminv rpfree rpf rpP "
-                        "rpptr rpnodes rpradius")
+                        "rpptr rpnodes rpradius ring")
 
 DAMPING = {"kinetic": R.DAMP_KINETIC, "viscous": R.DAMP_VISCOUS, "local": R.DAMP_LOCAL,
            "fire": R.DAMP_FIRE}
@@ -76,6 +77,12 @@ class SolverOptions:
     alpha : damping parameter (local: Cundall's coefficient, 0.8; viscous: fraction of the
         critical damping of the Rayleigh-quotient frequency, 1.0; fire: initial velocity-mixing
         factor alpha_start, 0.1)
+    ring : viscous damping: coefficient for the DOFs whose velocity reverses more often than every
+        5 iterations (0 <= ring < 2; 0: off). The damping of the whole motion follows its
+        Rayleigh quotient, which a local high-frequency oscillation dominates (frictional joints
+        that slide and stick keep one going); 1.0 damps it where it rings and leaves the rest to
+        the slow motion: the main job's first 30 rows need 27 % fewer iterations and the house's
+        plateau rows converge (BENCHMARKS.md section 27); 1.9 changed the peak's branch
     tol : an increment is converged when ||out-of-balance|| <= tol * ||applied loads + reactions||
     safety : fictitious masses = safety * Gershgorin row sum / 4 (stable for safety >= 1)
     max_iter : iteration cap of one increment before it is cut in two
@@ -119,6 +126,7 @@ class SolverOptions:
     """
     damping: str = "viscous"
     alpha: float = None
+    ring: float = 1.0
     tol: float = 1e-4
     safety: float = 1.1
     max_iter: int = 200_000
@@ -143,6 +151,8 @@ class SolverOptions:
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
                 raise ValueError(f"SolverOptions.{name} must be positive and finite, got {v}")
+        if not (np.isfinite(self.ring) and 0.0 <= self.ring < 2.0):
+            raise ValueError(f"SolverOptions.ring must be in [0, 2) (0: off), got {self.ring}")
         if self.safety < 1.0:
             raise ValueError(f"SolverOptions.safety must be >= 1 for a stable step, got {self.safety}")
         if self.coarse not in (True, False, "auto"):
@@ -359,7 +369,7 @@ class Simulation:
         self.dyn = Dyn(X, z.copy(), z.copy(), minv, free, tied, z.copy(), z.copy(), z.copy(),
                        z.copy(), rpX, np.zeros((nr, 6)), np.zeros((nr, 6)), rpminv,
                        np.ones((nr, 6)), np.zeros((nr, 6)), np.zeros((nr, 6)), rpptr, rpnodes,
-                       rpradius)
+                       rpradius, z.copy())
         from .sliding import Sliding
         self.sliding = Sliding(self) if (o.redetect and nc) else None
         movable = int((~m.block_fixed).sum())
@@ -756,7 +766,7 @@ class Simulation:
         most ``CALL_ITERATIONS`` (the same iterates as one call: ``R.I_SEG``), between which the
         progress bar is updated and Ctrl-C is honoured."""
         o, d = self.options, self.dyn
-        args = (DAMPING[o.damping], o.alpha, tol, self.ref_floor)
+        args = (DAMPING[o.damping], o.alpha, o.ring, tol, self.ref_floor)
         rejected = 0 if self.use_coarse else 2
         if self.use_coarse:
             if self.coarse is None:

@@ -8,7 +8,7 @@ out-of-balance force is small against the applied loads and reactions.
 
 Damping schemes (``DAMP_*``): kinetic damping (velocities zeroed at every peak of the kinetic
 energy, displacements moved back to the peak), viscous damping with a Rayleigh-quotient estimate of the lowest active frequency
-(Underwood), Cundall's local non-viscous damping (force reduced by ``alpha`` against the
+(Underwood; DOFs that ring get more, see ``relax``), Cundall's local non-viscous damping (force reduced by ``alpha`` against the
 velocity sign; the masses are raised by 1 + alpha, which the stable step needs), and FIRE (Bitzek
 et al. 2006, PRL 97 170201): undamped dynamics with an adaptive step factor ``dt`` <= 1, the
 velocity steered towards the force direction by the mixing factor ``a`` (``alpha`` at the start)
@@ -52,6 +52,13 @@ ST_RUNAWAY = 3
 ST_UNSTABLE = 4  # viscous damping: the motion's Rayleigh quotient stays above the stable limit
 ST_STALLED = 5   # the residual ratio did not fall below STALL_DROP x its best in stall_iter iterations
 ST_SLOW = 6      # the decrease of the residual, extrapolated, does not reach tol within the budget
+
+#: ring damping (viscous scheme): each DOF counts the sign reversals of its velocity, the count
+#: multiplied by RING_MEMORY every iteration (a memory of about ten iterations); above RING_COUNT
+#: (more than one reversal in five iterations: an oscillation of period < 10 iterations,
+#: (omega dt)^2 > 0.4) the DOF is damped with at least the coefficient ``ring`` of ``relax``
+RING_MEMORY = 0.9
+RING_COUNT = 2.0
 
 #: (omega dt)^2 of the central-difference stability limit, with a 5 % margin for the geometric
 #: stiffness that the Gershgorin masses do not bound
@@ -230,7 +237,7 @@ def reachable_decrease(d, d_prev, windows):
 
 
 @jit
-def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, tol, ref_floor, max_iter,
+def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, ring, tol, ref_floor, max_iter,
           check_every, stall_iter, u_limit, info):
     """Iterate one load increment to rest.
 
@@ -250,10 +257,19 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, tol, ref_floor
         damping scale, or FIRE's initial mixing factor alpha_start). With viscous damping the
         Rayleigh quotient (omega dt)^2 = V.dF / V.M.V of the motion (central differences are
         stable for (omega dt)^2 < 4) is checked every iteration but the first of a span (whose
-        dF holds the jump of the predictor or coarse correction): ``UNSTABLE_COUNT`` iterations
+        dF holds the jump of the predictor or coarse correction, or forces of an earlier state
+        after a restart; that iteration is undamped): ``UNSTABLE_COUNT`` iterations
         above ``UNSTABLE_RQ`` (the count ``info[I_OVER]`` halved every ``UNSTABLE_WINDOW``
         iterations; an unstable step is held bounded by opening joints, so the quotient only
         exceeds the limit now and then) stop the loop with ST_UNSTABLE.
+    ring : float
+        viscous scheme: damping coefficient (0 <= ring < 2) of the DOFs that ring, i.e. whose
+        velocity reverses more often than every 5 iterations (``RING_COUNT``; the counts
+        ``dyn.ring`` restart with each span); 0: none. The Rayleigh quotient is that of the
+        whole motion, and a local oscillation at high frequency (joints sliding and sticking
+        under a slab, or chattering at a crack) dominates it: the coefficient then suits neither
+        that oscillation, which frictional joints keep going, nor the slow motion that is left
+        (BENCHMARKS.md section 27).
     tol : float
         converged when ||r_free|| <= tol * max(reference, ref_floor).
     stall_iter : int
@@ -309,6 +325,8 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, tol, ref_floor
     win_k = info[I_WIN_K]
     seg = int(info[I_SEG])
     last_check = seg
+    if seg == 0:
+        dyn.ring[:] = 0.0
     place_rigid_nodes(dyn)
     for it in range(1, max_iter + 1):
         its = seg + it   # iteration of the span
@@ -377,7 +395,7 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, tol, ref_floor
                         du = dyn.V[i, k]
                         num += du * (dyn.fint[i, k] - fprev[i, k])
                         den += du * du / dyn.minv[i]
-            if den > 0.0 and num > 0.0:
+            if den > 0.0 and num > 0.0 and its > 1:
                 c_visc = alpha * 2.0 * np.sqrt(num / den)
             if c_visc > 1.9:
                 c_visc = 1.9
@@ -459,8 +477,13 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, tol, ref_floor
                         dyn.V[i, k] = v + dyn.minv[i] * (r - alpha * abs(r) * sg) / (1.0 + alpha)
                         damped += alpha * abs(r) * 0.5 * abs(v + dyn.V[i, k])
                     elif scheme == DAMP_VISCOUS:
-                        dyn.V[i, k] = ((2.0 - c_visc) * v + 2.0 * dyn.minv[i] * r) / (2.0 + c_visc)
-                        damped += c_visc * mi * (0.5 * (v + dyn.V[i, k])) ** 2
+                        c = c_visc
+                        if dyn.ring[i, k] > RING_COUNT and ring > c:
+                            c = ring
+                        vn = ((2.0 - c) * v + 2.0 * dyn.minv[i] * r) / (2.0 + c)
+                        dyn.ring[i, k] = RING_MEMORY * dyn.ring[i, k] + (1.0 if vn * v < 0.0 else 0.0)
+                        dyn.V[i, k] = vn
+                        damped += c * mi * (0.5 * (v + vn)) ** 2
                     elif scheme == DAMP_FIRE:
                         dyn.V[i, k] = keep * v + (c_mix + dt) * dyn.minv[i] * r
                     else:
