@@ -102,7 +102,12 @@ def gravity(sim):
     d.fext[:] = 0.0
     d.fext[:, 2] = -9.81 * sim.mass * d.free[:, 2]
     return [sim.mesh, sim.cont, d, np.zeros(1), np.zeros(3, dtype=np.int64), 1.0, R.DAMP_VISCOUS,
-            1.0, 0.0, sim.ref_floor, 1, 10, 0, 0.5 * sim.size, np.zeros(R.N_INFO)]
+            1.0, sim.options.ring, 0.0, sim.ref_floor, 1, 10, 0, 0.5 * sim.size,
+            np.zeros(R.N_INFO)]
+
+
+#: position of ``max_iter`` in the arguments of ``relax``
+RELAX_ITERS = 11
 
 
 def timed(fn, args, repeats, min_time):
@@ -154,7 +159,7 @@ def steady(params):
             frac = float(np.mean(args[10][:, JS_D] > 0))
             cases.append((label, contact_forces, args, nc, "contact-step", frac))
         rargs = gravity(sim)
-        rargs[10] = params["relax_iters"]
+        rargs[RELAX_ITERS] = params["relax_iters"]
         relax(*rargs)
         assert rargs[-1][I_STATUS] == ST_MAXITER, "relax stopped early; the timing would be wrong"
         cases.append(("relax iteration (viscous)", relax, rargs, ne * params["relax_iters"],

@@ -478,10 +478,12 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, ring, tol, ref
                         damped += alpha * abs(r) * 0.5 * abs(v + dyn.V[i, k])
                     elif scheme == DAMP_VISCOUS:
                         c = c_visc
-                        if dyn.ring[i, k] > RING_COUNT and ring > c:
+                        if ring > 0.0 and dyn.ring[i, k] > RING_COUNT and ring > c:
                             c = ring
                         vn = ((2.0 - c) * v + 2.0 * dyn.minv[i] * r) / (2.0 + c)
-                        dyn.ring[i, k] = RING_MEMORY * dyn.ring[i, k] + (1.0 if vn * v < 0.0 else 0.0)
+                        if ring > 0.0:   # the counts are only read with ring damping on
+                            dyn.ring[i, k] = (RING_MEMORY * dyn.ring[i, k]
+                                              + (1.0 if vn * v < 0.0 else 0.0))
                         dyn.V[i, k] = vn
                         damped += c * mi * (0.5 * (v + vn)) ** 2
                     elif scheme == DAMP_FIRE:
