@@ -17,11 +17,11 @@ hexahedra; softened by the block's mean damage) and the joints' stiffnesses at e
 point (slave node against master point): secant where the point softens or slides in the current
 trial state, elastic unloading elsewhere. Dynamic relaxation then only has to remove what
 the affine blocks cannot represent, local and fast: a two-level method with relaxation as the
-smoother. The operator is factorised once per increment (sparse LU). A step is accepted only if
-it lowers the total potential energy of the trial state (halved twice before giving up; the
-out-of-balance norm is no guide, as a coarse motion leaves element-scale residuals); it changes
-trial states only, never the committed history, so it cannot damage anything the relaxation
-would not.
+smoother. The operator is factorised once per increment (sparse LU, symmetric ordering). A
+step is accepted only if it lowers the total potential energy of the trial state (halved twice
+before giving up; the out-of-balance norm is no guide, as a coarse motion leaves element-scale
+residuals); it changes trial states only, never the committed history, so it cannot damage
+anything the relaxation would not.
 
 Fixed blocks and blocks tied to reference points are not coarse unknowns (the latter move with
 their reference point, whose free DOFs are); held node DOFs of the other blocks (supports,
@@ -305,7 +305,10 @@ class BlockCoarse:
         dg = A.diagonal()
         A = (A + sp.diags(1e-10 * dg + 1e-14 * dg.max())).tocsc()
         try:
-            solve = spla.factorized(A)
+            # A is symmetric positive definite: symmetric ordering, no pivoting (half the fill
+            # and factorisation time of the default column ordering, BENCHMARKS.md section 28)
+            solve = spla.splu(A, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                              options=dict(SymmetricMode=True)).solve
         except RuntimeError:
             return None
         op = dict(nbg=nbg, nr=nr, dof=dof, ndof=ndof, nodes=nodes, g=g, arm=arm, free=free,
