@@ -3,7 +3,8 @@
 Usage: ``python docs/make_validation_figures.py RESULT.h5 [RESULT.h5 ...]``: for each file, the
 scene is read from the file's stored configuration; writes into docs/ the response curve, the
 crack map (joint damage and block tensile damage) at the frame nearest the peak and at the last
-frame, the crushing map (block compressive damage) at the last frame and, for the house, the
+state (the last frame, or the checkpoint of a run stopped after it), the crushing map (block
+compressive damage) at the last state and, for the house, the
 vertical reactions of each wall and pier (paper Fig. 26).
 ``python docs/make_validation_figures.py overlay NAME RESULT.h5=LABEL ...`` draws the response
 curves of runs of one scene on one plot, ``docs/NAME.png``. Commands that made the result files
@@ -14,7 +15,7 @@ import sys
 
 import numpy as np
 
-from dr_masonry.results import open_result
+from dr_masonry.results import ResultsError, open_result
 from dr_masonry.viz.plots import crack_map, plot_history
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -45,9 +46,22 @@ def scene_of(r):
     return "squat_wall"
 
 
+def last_state(r):
+    """The last frame, or the last checkpoint when the run stopped after it (between frames)."""
+    try:
+        if r.frame_increment("checkpoint") > r.frame_ids[-1]:
+            return "checkpoint"
+    except ResultsError:
+        pass
+    return -1
+
+
 def nearest_frame(r, increment):
-    ids = np.asarray(r.frame_ids)
-    return int(np.argmin(np.abs(ids - increment)))
+    """Frame (or checkpoint) nearest to ``increment``."""
+    end = last_state(r)
+    ids = np.asarray(r.frame_ids + ([r.frame_increment(end)] if end == "checkpoint" else []))
+    i = int(np.argmin(np.abs(ids - increment)))
+    return end if i == len(r.frame_ids) else i
 
 
 def figures(path):
@@ -65,11 +79,11 @@ def figures(path):
     peak = int(h["increment"][int(np.argmax(np.abs(h[yk])))])
     for plane, names, tag in views:
         group = None if names is None else np.concatenate([r.groups[n] for n in names])
-        for which, frame in (("peak", nearest_frame(r, peak)), ("end", -1)):
+        for which, frame in (("peak", nearest_frame(r, peak)), ("end", last_state(r))):
             made.append(crack_map(r, frame, f"{stem}{tag}_cracks_{which}.png", plane=plane,
                                   blocks=group, warp=0.0))
-        made.append(crack_map(r, -1, f"{stem}{tag}_crushing_end.png", plane=plane, blocks=group,
-                              element_field="dc", threshold=0.99))
+        made.append(crack_map(r, last_state(r), f"{stem}{tag}_crushing_end.png", plane=plane,
+                              blocks=group, element_field="dc", threshold=0.99))
     return made
 
 

@@ -51,6 +51,10 @@ CONTACT_ARRAYS = {
 }
 
 
+#: frame "position" of the last checkpoint (:meth:`Result.frame`)
+CHECKPOINT = "checkpoint"
+
+
 class ResultsError(ValueError):
     """A results file that cannot be written or read as asked; the message says why."""
 
@@ -442,13 +446,44 @@ class Result:
             return int(g.attrs["increment"]), arrays, json.loads(g.attrs["meta"])
 
     def frame(self, i):
-        """Fields of frame ``i`` (position in :attr:`frame_ids`, negative counts from the end)."""
+        """Fields of frame ``i`` (position in :attr:`frame_ids`, negative counts from the end), or
+        of the last checkpoint (``i = "checkpoint"``: a run stopped between frames; the fields
+        the checkpoint holds, ``U``, ``dt``, ``dc``, ``D``, ``slip_max``)."""
+        if i == CHECKPOINT:
+            return self._checkpoint_fields()
         with h5py.File(self.path, "r") as f:
             g = self._frame_group(f, i)
             return {k: v[()] for k, v in g.items() if isinstance(v, h5py.Dataset)}
 
+    def frame_increment(self, i):
+        """Increment of frame ``i`` (or of the last checkpoint: ``i = "checkpoint"``)."""
+        if i == CHECKPOINT:
+            with h5py.File(self.path, "r") as f:
+                if "checkpoint" not in f:
+                    raise ResultsError(f"{self.path} has no checkpoint (written with every frame)")
+                return int(f["checkpoint"].attrs["increment"])
+        with h5py.File(self.path, "r") as f:
+            return int(self._frame_group(f, i).attrs["increment"])
+
+    def _checkpoint_fields(self):
+        from .kernels.joint_law import JS_D, JS_DMAX
+        from .kernels.plastic_damage import MS_DC, MS_DT
+        with h5py.File(self.path, "r") as f:
+            if "checkpoint" not in f:
+                raise ResultsError(f"{self.path} has no checkpoint (written with every frame)")
+            g = f["checkpoint"]
+            sb, sj = g["s_blocks"][()], g["s_joints"][()]
+            out = {"U": g["U"][()], "dt": sb[:, :, MS_DT].max(axis=1),
+                   "dc": sb[:, :, MS_DC].max(axis=1)}
+            if sj.shape[0]:
+                out.update(D=sj[:, JS_D].copy(), slip_max=sj[:, JS_DMAX].copy())
+            return out
+
     def locations(self, i):
         """Location ("node", "element" or "contact") of each field of frame ``i``."""
+        if i == CHECKPOINT:
+            return {"U": "node", "dt": "element", "dc": "element", "D": "contact",
+                    "slip_max": "contact"}
         with h5py.File(self.path, "r") as f:
             g = self._frame_group(f, i)
             return {k: str(v.attrs["location"]) for k, v in g.items()
@@ -461,7 +496,15 @@ class Result:
                     for k, v in self._frame_group(f, i).attrs.items()}
 
     def contacts(self, i=None):
-        """Contact arrays valid at frame ``i`` (the frame's own set if it has one), or None."""
+        """Contact arrays valid at frame ``i`` (the frame's own set if it has one; ``i =
+        "checkpoint"``: the checkpoint's), or None."""
+        if i == CHECKPOINT:
+            _, arrays, _ = self.checkpoint()
+            a = {k.split("/")[1]: v for k, v in arrays.items() if k.startswith("contacts/")}
+            base = self.model_arrays["contacts"]
+            if base is None or "master" not in a or not np.asarray(a["master"]).size:
+                return base
+            return dict(base, **{k: a[k] for k in CONTACT_ARRAYS if k in a})
         if i is not None:
             with h5py.File(self.path, "r") as f:
                 g = self._frame_group(f, i)

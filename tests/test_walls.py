@@ -3,6 +3,7 @@
 The tiny wall is 4 bricks (0.88 m) long, 10 courses (0.81 m) high, one hexahedron per brick.
 """
 import math
+import os
 
 import numpy as np
 import pytest
@@ -13,6 +14,7 @@ from dr_masonry.loading import LoadingError
 from dr_masonry.params import ParameterError
 from dr_masonry.postprocess import PostprocessError, cycle_bounds, energy_per_cycle
 from dr_masonry.protocols import PROTOCOLS, S4, S5
+from dr_masonry.viz.plots import crack_map
 from interrupt import interrupt_after
 
 L, T, NC, HC = 0.88, 0.102, 10, 0.081
@@ -233,11 +235,26 @@ def test_checkpoint_between_frames(tmp_path, monkeypatch):
         squat_wall.run(params)
     r = open_result(params["h5"])
     assert r.frame_ids == [2] and r.checkpoint()[0] == 6   # the increment before the interrupt
+    # the state of the interrupted run can be drawn from its checkpoint
+    assert r.frame_increment("checkpoint") == 6
+    png = crack_map(r, "checkpoint", str(tmp_path / "ck.png"), threshold=0.0)
+    assert os.path.getsize(png) > 0
     monkeypatch.setattr(Simulation, "_commit", commit)
     sim, hist, _ = squat_wall.run(dict(params, resume=True))
     sim.close()
     sim, whole, _ = squat_wall.run(dict(params, h5=str(tmp_path / "whole.h5")))
     sim.close()
+    # at the end of a run the checkpoint is the last frame's state: its fields, read from the
+    # restart arrays, are the frame's (written from the solver's fields)
+    w = open_result(str(tmp_path / "whole.h5"))
+    assert w.frame_increment("checkpoint") == w.frame_ids[-1] == w.frame_increment(-1)
+    ck, last = w.frame("checkpoint"), w.frame(-1)
+    assert set(ck) == {"U", "dt", "dc", "D", "slip_max"}
+    assert np.abs(last["U"]).max() > 0.0 and last["D"].max() > 0.0
+    for k in ck:
+        assert np.array_equal(ck[k], last[k]), k
+    assert w.locations("checkpoint")["dt"] == w.locations(-1)["dt"] == "element"
+    assert w.contacts("checkpoint")["slave"].shape == last["D"].shape
     assert np.array_equal(hist["increment"], whole["increment"])
     assert np.allclose(hist["beam.fx"], whole["beam.fx"], rtol=1e-3, atol=1.0)
     assert open_result(params["h5"]).n_history == whole["increment"].size

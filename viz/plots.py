@@ -90,8 +90,9 @@ def crack_map(result, frame, png, threshold=0.5, field="D", plane="xz", blocks=N
     Parameters
     ----------
     result : str or Result
-    frame : int
-        frame position (negative from the end).
+    frame : int or "checkpoint"
+        frame position (negative from the end), or the last checkpoint (a run stopped between
+        frames).
     png : str
         output file.
     threshold : float
@@ -162,7 +163,7 @@ def crack_map(result, frame, png, threshold=0.5, field="D", plane="xz", blocks=N
     ax.autoscale_view()
     ax.set_xlabel(f"{plane[0]} [m]")
     ax.set_ylabel(f"{plane[1]} [m]")
-    inc = r.frame_ids[frame]
+    inc = r.frame_increment(frame)
     ax.set_title(title or f"{os.path.basename(r.path)}: increment {inc}")
     fig.tight_layout()
     fig.savefig(png, dpi=150)

@@ -152,9 +152,9 @@ def render_model(model_or_h5, png, field=None, frame=None, warp=1.0, view="iso",
         a frame field: node fields ("U": |U|, m) colour points, element fields ("dt", "dc")
         colour hexahedra, contact fields ("D", ...) colour the contact points over grey blocks.
         None colours blocks by group.
-    frame : int, optional
-        frame position (negative from the end); default the last frame when ``field`` is given,
-        else the reference configuration.
+    frame : int or "checkpoint", optional
+        frame position (negative from the end) or the last checkpoint; default the last frame
+        when ``field`` is given, else the reference configuration.
     warp : float
         displacement magnification of the drawn positions.
     view : {"iso", "front", "back", "side", "top"}
