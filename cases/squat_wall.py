@@ -73,6 +73,7 @@ PARAMS = dict(
     redetect=True,          # finite sliding of the joints (SolverOptions.redetect)
     max_iter=200_000,       # iteration cap of an increment before it is cut (SolverOptions)
     max_cuts=4,             # halvings of an increment before the run stops (SolverOptions)
+    floor_tol=0.0,          # accept a stalled increment at this residual (SolverOptions; 0: off)
     frames=5,               # write a field frame every this many increments
     resume=False,           # continue the run stored in out.h5 from its last checkpoint
     fast=False,             # preset FAST: tiny 0.88 x 0.81 m coarse wall, few increments

@@ -19,7 +19,8 @@ def scene_params(defaults, fast, argv, doc):
 
 
 #: scene parameters that are :class:`SolverOptions` fields of the same name
-OPTION_KEYS = ("tol", "damping", "coarse", "max_dissipation", "redetect", "max_iter", "max_cuts")
+OPTION_KEYS = ("tol", "damping", "coarse", "max_dissipation", "redetect", "max_iter", "max_cuts",
+               "floor_tol")
 #: parameters that may differ when a run is continued: how it is solved and written, not what
 SOLVER_KEYS = {"resume", "progress", "out", "h5", "frames", "solver", *OPTION_KEYS}
 

@@ -7,6 +7,7 @@ history variables, energy audit, guards and output (through ``dr_masonry.results
 from __future__ import annotations
 
 import time
+import warnings
 from collections import namedtuple
 from dataclasses import asdict, dataclass
 
@@ -95,6 +96,11 @@ class SolverOptions:
         of the last ``stall_iter`` iterations, it would not reach ``tol`` within ``max_iter``
         (then it is cut at once, section 15); at the last allowed cut the increment runs to
         ``max_iter``
+    floor_tol : an increment that stops short of ``tol`` (stalled, too slow, or at ``max_iter``)
+        with its residual ratio at or below ``floor_tol`` is accepted instead of cut, with a
+        warning; 0 (default): never. Where joints chatter at a mechanism, the relaxation can
+        settle on a floor at 1-3 x ``tol`` that smaller steps do not remove (BENCHMARKS.md
+        sections 13 and 29); the history's ``residual`` column shows each row's ratio
     max_dissipation : load-step control, off by default (0): a converged increment whose damage
         dissipation (blocks, and joints without friction) exceeds this fraction of the external
         work done so far is cut in two (accepted at the last allowed cut). Where many joints
@@ -132,6 +138,7 @@ class SolverOptions:
     max_iter: int = 200_000
     max_cuts: int = 4
     stall_iter: int = 10_000
+    floor_tol: float = 0.0
     max_dissipation: float = 0.0
     check_every: int = 10
     energy_tol: float = 0.01
@@ -151,6 +158,9 @@ class SolverOptions:
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
                 raise ValueError(f"SolverOptions.{name} must be positive and finite, got {v}")
+        if not (np.isfinite(self.floor_tol) and (self.floor_tol == 0.0 or self.floor_tol >= self.tol)):
+            raise ValueError(f"SolverOptions.floor_tol must be 0 (off) or >= tol = {self.tol}, got "
+                             f"{self.floor_tol}")
         if not (np.isfinite(self.ring) and 0.0 <= self.ring < 2.0):
             raise ValueError(f"SolverOptions.ring must be in [0, 2) (0: off), got {self.ring}")
         if self.safety < 1.0:
@@ -726,13 +736,15 @@ class Simulation:
                        f"difference limit 4 (fastest node {node}, block "
                        f"{self.model.node_block[node]}); the fictitious masses are too small for "
                        f"the stiffness: raise SolverOptions.safety (now {o.safety})")
-        energies = self._energies() if status == R.ST_CONVERGED else None
+        short = status in (R.ST_MAXITER, R.ST_STALLED, R.ST_SLOW)
+        floor = short and 0.0 < info[R.I_RESID] <= o.floor_tol
+        energies = self._energies() if status == R.ST_CONVERGED or floor else None
         # a half that dissipates as much as the whole step holds a jump (a crack that runs
         # unstably): smaller steps would only repeat it, so it is accepted
         too_much = (energies is not None and o.max_dissipation > 0 and depth < o.max_cuts
                     and energies.ratio > o.max_dissipation
                     and not (parent_diss is not None and energies.diss >= JUMP * parent_diss))
-        if status in (R.ST_MAXITER, R.ST_STALLED, R.ST_SLOW) or too_much:
+        if (short and not floor) or too_much:
             self._restore(snap)
             self._cut_work[0] += int(info[R.I_ITERS])
             self._cut_work[1] += elapsed
@@ -751,6 +763,11 @@ class Simulation:
             self._increment(stage, targets, mid, indirect, depth + 1, diss)
             self._increment(stage, targets, goal, indirect, depth + 1, diss)
             return
+        if floor:
+            warnings.warn(f"increment {self.increment + 1} of stage {stage.name!r} accepted at "
+                          f"residual ratio {info[R.I_RESID]:.2e} (tol {tol:.1e}, floor_tol "
+                          f"{o.floor_tol:.1e}) after {int(info[R.I_ITERS])} iterations",
+                          RuntimeWarning, stacklevel=2)
         self.du_prev = (d.U - u_before) * d.free
         self.dctl_prev = dctl
         self._commit(info, elapsed, energies)
@@ -941,7 +958,6 @@ class Simulation:
                         - self._overhang0, 0.0) * (cont.area > 0.0)   # not the points off a face
         k = int(np.argmax(ov / self._side_size))
         if ov[k] > OVERHANG_WARN * self._side_size[k] and "overhang" not in self._warned:
-            import warnings
             self._warned.add("overhang")
             node = int(cont.slave[k])
             why = ("no other face is under it, so it still pushes on that face until it is half an "
@@ -962,7 +978,6 @@ class Simulation:
         balance: each increment is applied as a step, and relaxing it to rest removes about
         half of (load step x displacement step), whatever the increment; it is reported only.
         """
-        import warnings
         err = abs(row["balance_error"])
         if err > self.options.energy_tol and "balance" not in self._warned:
             self._warned.add("balance")

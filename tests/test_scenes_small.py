@@ -134,6 +134,32 @@ def test_unconverged_increment_is_cut_and_accounted(monkeypatch):
         sim.run(stages)
 
 
+def test_floor_tol_accepts_an_increment_short_of_tol():
+    """With ``floor_tol`` an increment stopped at ``max_iter`` short of ``tol`` is accepted (with
+    a warning, its ratio in the history) when its ratio is at or below ``floor_tol``; above it,
+    it is cut as before (no cuts left: the run stops)."""
+    from dr_masonry import SolverOptions
+    sim, stages = couplet.build(dict(couplet.PARAMS, h5=None))
+    sim.options.max_iter, sim.options.max_cuts, sim.options.coarse = 35, 0, False
+    sim.options.floor_tol = 0.9
+    with pytest.warns(RuntimeWarning, match=r"accepted at residual ratio .* floor_tol 9.0e-01"):
+        hist = sim.run(stages)
+    n = couplet.PARAMS["increments"]
+    assert hist["iterations"].size == n and not hist["cut_iterations"].any()
+    assert np.all(hist["residual"] <= 0.9) and np.any(hist["residual"] > sim.options.tol)
+    short = hist["residual"] > sim.options.tol
+    assert np.all(hist["iterations"][short] == 35)
+    # a floor below the ratios reached: the first short increment stops the run as before
+    sim, stages = couplet.build(dict(couplet.PARAMS, h5=None))
+    sim.options.max_iter, sim.options.max_cuts, sim.options.coarse = 35, 0, False
+    sim.options.floor_tol = 1e-4 * 1.0001
+    with pytest.raises(SolverError, match="did not converge in 35 iterations"):
+        sim.run(stages)
+    for bad in (1e-5, float("nan"), -1.0):
+        with pytest.raises(ValueError, match="floor_tol"):
+            SolverOptions(floor_tol=bad)
+
+
 def test_dissipation_control_refines_the_peak():
     """S1 in 8 increments (cubic spacing): with the control off the peak falls between two
     increments and is missed by 10 %; with ``max_dissipation`` (0.05) the increments that dissipate
