@@ -99,8 +99,9 @@ class SolverOptions:
     floor_tol : an increment that stops short of ``tol`` (stalled, too slow, or at ``max_iter``)
         with its residual ratio at or below ``floor_tol`` is accepted instead of cut, with a
         warning; 0 (default): never. Where joints chatter at a mechanism, the relaxation can
-        settle on a floor at 1-3 x ``tol`` that smaller steps do not remove (BENCHMARKS.md
-        sections 13 and 29); the history's ``residual`` column shows each row's ratio
+        settle on a floor at 1-9 x ``tol`` that smaller steps do not remove; an accepted row is
+        then the middle of a snap, its load a few per cent high (BENCHMARKS.md sections 13 and
+        29); the history's ``residual`` column shows each row's ratio
     max_dissipation : load-step control, off by default (0): a converged increment whose damage
         dissipation (blocks, and joints without friction) exceeds this fraction of the external
         work done so far is cut in two (accepted at the last allowed cut). Where many joints
