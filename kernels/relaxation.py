@@ -391,15 +391,15 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, ring, tol, ref
             den = 0.0
             for i in range(n):
                 for k in range(3):
-                    if dyn.free[i, k] > 0.0:
+                    if dyn.free[i, k] > 0.0:   # (fprev is only read at free DOFs)
                         du = dyn.V[i, k]
                         num += du * (dyn.fint[i, k] - fprev[i, k])
                         den += du * du / dyn.minv[i]
+                        fprev[i, k] = dyn.fint[i, k]
             if den > 0.0 and num > 0.0 and its > 1:
                 c_visc = alpha * 2.0 * np.sqrt(num / den)
             if c_visc > 1.9:
                 c_visc = 1.9
-            fprev[:] = dyn.fint
             if its > 1 and num > UNSTABLE_RQ * den > 0.0:
                 n_over += 1.0
             if its % UNSTABLE_WINDOW == 0:
@@ -466,6 +466,9 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, ring, tol, ref
                     damped += 0.5 * (vmv - keep * keep * vmv - 2.0 * keep * c_mix * pw
                                      - c_mix * c_mix * fmf)
         ke = 0.0
+        # the displacement update of the node DOFs is fused into this loop (one pass over the
+        # nodes), except with kinetic damping, which may go back to the energy peak first
+        umax = 0.0
         for i in range(n):
             mi = 1.0 / dyn.minv[i]
             for k in range(3):
@@ -491,6 +494,12 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, ring, tol, ref
                     else:
                         dyn.V[i, k] += dyn.minv[i] * r
                     ke += 0.5 * mi * dyn.V[i, k] ** 2
+                    if scheme != DAMP_KINETIC:
+                        dyn.U[i, k] += dt * dyn.V[i, k]
+                        a = abs(dyn.U[i, k])
+                        if a > umax or not np.isfinite(a):
+                            umax = a
+                            worst = i
         for p in range(nr):
             for k in range(6):
                 if dyn.rpfree[p, k] > 0.0:
@@ -523,16 +532,16 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, ring, tol, ref
                 dyn.rpV[:] = 0.0
                 ke = 0.0
             ke_prev = ke
-        # ---- displacement update ------------------------------------------------------
-        umax = 0.0
-        for i in range(n):
-            for k in range(3):
-                if dyn.free[i, k] > 0.0:
-                    dyn.U[i, k] += dt * dyn.V[i, k]
-                    a = abs(dyn.U[i, k])
-                    if a > umax or not np.isfinite(a):
-                        umax = a
-                        worst = i
+        # ---- displacement update (node DOFs: above, except with kinetic damping) -----------
+        if scheme == DAMP_KINETIC:
+            for i in range(n):
+                for k in range(3):
+                    if dyn.free[i, k] > 0.0:
+                        dyn.U[i, k] += dt * dyn.V[i, k]
+                        a = abs(dyn.U[i, k])
+                        if a > umax or not np.isfinite(a):
+                            umax = a
+                            worst = i
         for p in range(nr):
             for k in range(6):
                 if dyn.rpfree[p, k] > 0.0:
