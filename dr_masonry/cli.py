@@ -86,7 +86,7 @@ def _cmd_vtk(args):
 
 
 def _cmd_info(args):
-    from dr_masonry.results import open_result
+    from dr_masonry.results import CHECKPOINT, ResultsError, open_result
     r = open_result(args.result)
     print(f"file:      {r.path}")
     print(f"code:      dr_masonry {r.attrs['code_version']}, schema {r.attrs['schema_version']}, "
@@ -97,6 +97,12 @@ def _cmd_info(args):
     print(f"history:   {r.n_history} rows, columns {list(r.history)}")
     ids = r.frame_ids
     print(f"frames:    {r.n_frames}" + (f" (increments {ids[0]} .. {ids[-1]})" if ids else ""))
+    try:
+        ck = r.frame_increment(CHECKPOINT)
+        print(f"checkpoint: increment {ck}" + (" (after the last frame; frame 'checkpoint' reads "
+                                               "its fields)" if not ids or ck > ids[-1] else ""))
+    except ResultsError:
+        print("checkpoint: none")
     if r.n_history:
         print("last row:  " + ", ".join(f"{k}={v[-1]:.6g}" for k, v in r.history.items()))
         unknown = [k for k in args.peak if k not in r.history]

@@ -95,6 +95,7 @@ def test_info(tmp_path, capsys):
     assert "2 blocks, 4 hexahedra, 24 nodes, 6 contact points" in out
     assert "history:   5 rows, columns ['increment', 'disp', 'force']" in out
     assert "frames:    3 (increments 0 .. 4)" in out
+    assert "checkpoint: none" in out
     assert "last row:  increment=4, disp=0.0004, force=-756.802" in out
     # 1e3 sin(i), i = 0..4: max at i = 2, min at i = 4
     assert "peak force: max 909.297 (row 2), min -756.802 (row 4)" in out
@@ -103,6 +104,27 @@ def test_info(tmp_path, capsys):
     assert "no history column ['drift']" in capsys.readouterr().err
     assert main(["info", str(tmp_path / "none.h5")]) == 2
     assert "does not exist" in capsys.readouterr().err
+
+
+def test_info_checkpoint_after_the_last_frame(tmp_path, capsys):
+    """A run stopped between frames: info names its checkpoint, whose fields read as a frame."""
+    import numpy as np
+    from dr_masonry.kernels.joint_law import JS_D, NJS
+    from dr_masonry.kernels.plastic_damage import MS_DT, NMS
+    from dr_masonry.results import ResultWriter, open_result
+    p = tmp_path / "r.h5"
+    write_fake_result(p)
+    sb = np.zeros((4, 8, NMS))
+    sb[2, 5, MS_DT] = 0.3
+    sj = np.zeros((6, NJS))
+    sj[1, JS_D] = 0.7
+    with ResultWriter(p, None, {}, mode="a") as w:
+        w.write_checkpoint(6, {"U": np.full((24, 3), 1e-3), "s_blocks": sb, "s_joints": sj}, {})
+    assert main(["info", str(p)]) == 0
+    assert "checkpoint: increment 6 (after the last frame" in capsys.readouterr().out
+    fields = open_result(p).frame("checkpoint")
+    assert fields["dt"].tolist() == [0.0, 0.0, 0.3, 0.0] and fields["D"][1] == 0.7
+    assert fields["U"].shape == (24, 3)
 
 
 def test_vtk_command(tmp_path, capsys):
