@@ -350,6 +350,20 @@ def _check_field(name, value, sizes):
                        f"n_contacts={sizes['contact']}")
 
 
+def state_fields(U, s_blocks, s_joints):
+    """Frame fields of a committed state: ``U`` (n_nodes, 3) m, the largest block damage over
+    the Gauss points ``dt``, ``dc`` (n_elements,) of ``s_blocks`` (n_elements, 8, NMS) and, with
+    contacts, the joint damage ``D`` and largest slip ``slip_max`` (n_contacts,) m of ``s_joints``
+    (n_contacts, NJS). The solver's frames add the gaps and tractions of the current trial."""
+    from .kernels.joint_law import JS_D, JS_DMAX
+    from .kernels.plastic_damage import MS_DC, MS_DT
+    f = {"U": U.copy(), "dt": s_blocks[:, :, MS_DT].max(axis=1),
+         "dc": s_blocks[:, :, MS_DC].max(axis=1)}
+    if s_joints.shape[0]:
+        f.update(D=s_joints[:, JS_D].copy(), slip_max=s_joints[:, JS_DMAX].copy())
+    return f
+
+
 # ---------------------------------------------------------------------- reading
 def check_file(path):
     """Raise :class:`ResultsError` unless ``path`` is a dr_masonry results file of this schema."""
@@ -434,12 +448,16 @@ class Result:
                                f"{self.n_frames} frames") from None
         return f["frames"][_frame_name(inc)]
 
+    def _checkpoint_group(self, f):
+        """The open file's ``/checkpoint`` group; ResultsError if there is none."""
+        if "checkpoint" not in f:
+            raise ResultsError(f"{self.path} has no checkpoint (written with every frame)")
+        return f["checkpoint"]
+
     def checkpoint(self):
         """(increment, arrays dict, meta dict) of the last checkpoint; ResultsError if none."""
         with h5py.File(self.path, "r") as f:
-            if "checkpoint" not in f:
-                raise ResultsError(f"{self.path} has no checkpoint (written with every frame)")
-            g = f["checkpoint"]
+            g = self._checkpoint_group(f)
             arrays = {}
             g.visititems(lambda k, v: arrays.__setitem__(k, v[()])
                          if isinstance(v, h5py.Dataset) else None)
@@ -457,27 +475,14 @@ class Result:
 
     def frame_increment(self, i):
         """Increment of frame ``i`` (or of the last checkpoint: ``i = "checkpoint"``)."""
-        if i == CHECKPOINT:
-            with h5py.File(self.path, "r") as f:
-                if "checkpoint" not in f:
-                    raise ResultsError(f"{self.path} has no checkpoint (written with every frame)")
-                return int(f["checkpoint"].attrs["increment"])
         with h5py.File(self.path, "r") as f:
-            return int(self._frame_group(f, i).attrs["increment"])
+            g = self._checkpoint_group(f) if i == CHECKPOINT else self._frame_group(f, i)
+            return int(g.attrs["increment"])
 
     def _checkpoint_fields(self):
-        from .kernels.joint_law import JS_D, JS_DMAX
-        from .kernels.plastic_damage import MS_DC, MS_DT
         with h5py.File(self.path, "r") as f:
-            if "checkpoint" not in f:
-                raise ResultsError(f"{self.path} has no checkpoint (written with every frame)")
-            g = f["checkpoint"]
-            sb, sj = g["s_blocks"][()], g["s_joints"][()]
-            out = {"U": g["U"][()], "dt": sb[:, :, MS_DT].max(axis=1),
-                   "dc": sb[:, :, MS_DC].max(axis=1)}
-            if sj.shape[0]:
-                out.update(D=sj[:, JS_D].copy(), slip_max=sj[:, JS_DMAX].copy())
-            return out
+            g = self._checkpoint_group(f)
+            return state_fields(g["U"][()], g["s_blocks"][()], g["s_joints"][()])
 
     def locations(self, i):
         """Location ("node", "element" or "contact") of each field of frame ``i``."""
@@ -499,8 +504,9 @@ class Result:
         """Contact arrays valid at frame ``i`` (the frame's own set if it has one; ``i =
         "checkpoint"``: the checkpoint's), or None."""
         if i == CHECKPOINT:
-            _, arrays, _ = self.checkpoint()
-            a = {k.split("/")[1]: v for k, v in arrays.items() if k.startswith("contacts/")}
+            with h5py.File(self.path, "r") as f:
+                g = self._checkpoint_group(f)
+                a = {k: v[()] for k, v in g["contacts"].items()} if "contacts" in g else {}
             base = self.model_arrays["contacts"]
             if base is None or "master" not in a or not np.asarray(a["master"]).size:
                 return base

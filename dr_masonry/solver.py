@@ -18,7 +18,7 @@ from .kernels import relaxation as R
 from .kernels.assembly import node_row_map
 from .kernels.contact_forces import contact_rowsum
 from .kernels.hex8 import hex_geometry_shared, lumped_mass, stiffness_rowsum
-from .kernels.joint_law import JS_D, JS_DISS, JS_DISSF, JS_DMAX
+from .kernels.joint_law import JS_D, JS_DISS, JS_DISSF
 from .kernels.plastic_damage import MS_DC, MS_DISS, MS_DT
 
 Mesh = namedtuple("Mesh", "conn active dN geo wdet h emat mparams s_old s_new fbuf energy ptr rows")
@@ -988,14 +988,12 @@ class Simulation:
 
     def fields(self):
         """Current field values for a frame: U, dt, dc per element, D/opening/slip per contact."""
+        from .results import state_fields
         d, mesh, cont = self.dyn, self.mesh, self.cont
-        f = {"U": d.U.copy(),
-             "dt": mesh.s_old[:, :, MS_DT].max(axis=1), "dc": mesh.s_old[:, :, MS_DC].max(axis=1)}
+        f = state_fields(d.U, mesh.s_old, cont.s_old)
         if cont.slave.size:
-            f.update(D=cont.s_old[:, JS_D].copy(), opening=cont.gaps[:, 0].copy(),
-                     slip=np.hypot(cont.gaps[:, 1], cont.gaps[:, 2]), sigma=cont.trac[:, 0].copy(),
-                     tau=np.hypot(cont.trac[:, 1], cont.trac[:, 2]),
-                     slip_max=cont.s_old[:, JS_DMAX].copy())
+            f.update(opening=cont.gaps[:, 0].copy(), slip=np.hypot(cont.gaps[:, 1], cont.gaps[:, 2]),
+                     sigma=cont.trac[:, 0].copy(), tau=np.hypot(cont.trac[:, 1], cont.trac[:, 2]))
         return f
 
     def _write_frame(self):
