@@ -56,9 +56,8 @@ def last_state(r):
     return -1
 
 
-def nearest_frame(r, increment):
-    """Frame (or checkpoint) nearest to ``increment``."""
-    end = last_state(r)
+def nearest_frame(r, increment, end):
+    """Frame (or checkpoint, when ``end`` = :func:`last_state` is it) nearest to ``increment``."""
     ids = np.asarray(r.frame_ids + ([r.frame_increment(end)] if end == "checkpoint" else []))
     i = int(np.argmin(np.abs(ids - increment)))
     return end if i == len(r.frame_ids) else i
@@ -77,12 +76,13 @@ def figures(path):
                                  stem + "_reactions.png", ylabel="vertical reaction, half model [kN]",
                                  title="reactions of the piers (P1 wide, P2 narrow) and walls"))
     peak = int(h["increment"][int(np.argmax(np.abs(h[yk])))])
+    end = last_state(r)
     for plane, names, tag in views:
         group = None if names is None else np.concatenate([r.groups[n] for n in names])
-        for which, frame in (("peak", nearest_frame(r, peak)), ("end", last_state(r))):
+        for which, frame in (("peak", nearest_frame(r, peak, end)), ("end", end)):
             made.append(crack_map(r, frame, f"{stem}{tag}_cracks_{which}.png", plane=plane,
                                   blocks=group, warp=0.0))
-        made.append(crack_map(r, last_state(r), f"{stem}{tag}_crushing_end.png", plane=plane,
+        made.append(crack_map(r, end, f"{stem}{tag}_crushing_end.png", plane=plane,
                               blocks=group, element_field="dc", threshold=0.99))
     return made
 
