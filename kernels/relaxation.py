@@ -225,6 +225,17 @@ def norms(dyn, lam, rpres):
 
 
 @ijit
+def move_dof(dyn, i, k, dt, umax, worst):
+    """``U[i, k] += dt V[i, k]``; returns the largest |U| so far and its node, (umax, worst), a
+    non-finite value taking the place of the largest."""
+    dyn.U[i, k] += dt * dyn.V[i, k]
+    a = abs(dyn.U[i, k])
+    if a > umax or not np.isfinite(a):
+        return a, i
+    return umax, worst
+
+
+@ijit
 def reachable_decrease(d, d_prev, windows):
     """Decrease of log(residual ratio) still reachable in ``windows`` (>= 0) rate windows after
     two that decreased it by ``d_prev`` and then ``d`` (>= 0; ``d_prev`` 0: unknown): a geometric
@@ -495,11 +506,7 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, ring, tol, ref
                         dyn.V[i, k] += dyn.minv[i] * r
                     ke += 0.5 * mi * dyn.V[i, k] ** 2
                     if scheme != DAMP_KINETIC:
-                        dyn.U[i, k] += dt * dyn.V[i, k]
-                        a = abs(dyn.U[i, k])
-                        if a > umax or not np.isfinite(a):
-                            umax = a
-                            worst = i
+                        umax, worst = move_dof(dyn, i, k, dt, umax, worst)
         for p in range(nr):
             for k in range(6):
                 if dyn.rpfree[p, k] > 0.0:
@@ -537,11 +544,7 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, ring, tol, ref
             for i in range(n):
                 for k in range(3):
                     if dyn.free[i, k] > 0.0:
-                        dyn.U[i, k] += dt * dyn.V[i, k]
-                        a = abs(dyn.U[i, k])
-                        if a > umax or not np.isfinite(a):
-                            umax = a
-                            worst = i
+                        umax, worst = move_dof(dyn, i, k, dt, umax, worst)
         for p in range(nr):
             for k in range(6):
                 if dyn.rpfree[p, k] > 0.0:
