@@ -10,20 +10,15 @@ Case scripts parse their ``key=value`` arguments with :func:`dr_masonry.params.p
 """
 from __future__ import annotations
 
-import os
+import argparse
+import importlib
+import json
+import pkgutil
+import sys
 
-# Threads spin-wait with the OpenMP layer on a loaded machine: be passive (before Numba loads).
-os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+import numpy as np
 
-import argparse  # noqa: E402
-import importlib  # noqa: E402
-import json  # noqa: E402
-import pkgutil  # noqa: E402
-import sys  # noqa: E402
-
-import numpy as np  # noqa: E402
-
-from .params import ParameterError  # noqa: E402
+from .params import ParameterError
 
 
 def available_cases():
