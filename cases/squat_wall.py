@@ -43,6 +43,7 @@ from dr_masonry.geometry import BrickSpec, add_beam, add_foundation, add_wall, p
 from dr_masonry.loading import Gravity
 from dr_masonry.materials.joint import KC_PEN_FACTOR
 from dr_masonry.params import ParameterError
+from dr_masonry.postprocess import cycle_text, energy_per_cycle
 from dr_masonry.protocols import S5
 from dr_masonry.scene import (finish, run_stages, scene_params, solver_options, solver_summary,
                               with_penalty)
@@ -58,6 +59,7 @@ PARAMS = dict(
     increments=60,          # increments of the monotonic push (30: peak 5.7 % low)
     grading=1.5,            # monotonic: i-th target = drift * (i / increments) ** grading
     step=0.5 * mm,          # cyclic: largest displacement per increment, m
+    quarter_increments=2,   # cyclic: fewest increments per quarter cycle
     n_amplitudes=0,         # cyclic: run only the first n amplitudes (0: all)
     pre_increments=4,       # increments of the pre-compression stage
     mesh="coarse",          # coarse (1 x 1 x 1 hexahedra per brick) | fine (4 x 1 x 2)
@@ -184,7 +186,8 @@ def build(params, protocol=S5):
     if kind == "monotonic":
         path = protocol.monotonic_path(params["increments"], H, params["drift"], params["grading"])
     else:
-        path = protocol.path(H, step=params["step"], n_amplitudes=params["n_amplitudes"] or None)
+        path = protocol.path(H, step=params["step"], quarter_increments=params["quarter_increments"],
+                             n_amplitudes=params["n_amplitudes"] or None)
     stages = [Stage("precompression", params["pre_increments"], pre, frames=params["pre_increments"]),
               Stage("push", path.size, [Displacement(target=beam, dof="x", path=path, name="push")],
                     frames=params["frames"])]
@@ -210,10 +213,15 @@ def report(sim, hist, push):
 def main(argv=None, doc=__doc__, defaults=PARAMS, protocol=S5, title="S5 squat wall"):
     params = scene_params(defaults, FAST, sys.argv[1:] if argv is None else argv, doc)
     sim, hist, push = run(params, protocol)
+    cycles = (energy_per_cycle(hist, "beam.ux", push, force="beam.fx")
+              if params["protocol"] == "cyclic" else None)
     finish(sim, params["out"], x=hist["beam.ux"][push] / mm, y=hist["beam.fx"][push] / kN,
            xlabel="top displacement (mm)", ylabel="base shear (kN)",
-           title=f"{title}, {params['protocol']}, {params['bc']}, {params['variant']}")
+           title=f"{title}, {params['protocol']}, {params['bc']}, {params['variant']}",
+           cycles=cycles)
     print(report(sim, hist, push))
+    if cycles:
+        print(cycle_text(cycles))
 
 
 if __name__ == "__main__":

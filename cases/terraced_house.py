@@ -44,6 +44,7 @@ from dr_masonry.geometry import BrickSpec, HouseParams, terraced_house
 from dr_masonry.loading import Gravity
 from dr_masonry.materials.joint import KC_PEN_FACTOR
 from dr_masonry.params import ParameterError
+from dr_masonry.postprocess import cycle_text, energy_per_cycle
 from dr_masonry.protocols import S7
 from dr_masonry.scene import (finish, run_stages, scene_params, solver_options, solver_summary,
                               with_penalty)
@@ -56,6 +57,7 @@ PARAMS = dict(
     increments=30,          # increments of the monotonic push
     grading=1.5,            # monotonic: i-th target = target * (i / increments) ** grading
     step=2.5 * mm,          # cyclic: largest displacement per increment, m
+    quarter_increments=2,   # cyclic: fewest increments per quarter cycle
     n_amplitudes=0,         # cyclic: run only the first n amplitudes (0: all)
     gravity_increments=4,
     mesh="coarse",          # coarse (1 x 1 x 1 hexahedra per brick) | fine (4 x 1 x 2)
@@ -135,7 +137,8 @@ def build(params):
                                                        target=params["target"],
                                                        grading=params["grading"])
     else:
-        path = S7.path(step=params["step"], n_amplitudes=params["n_amplitudes"] or None,
+        path = S7.path(step=params["step"], quarter_increments=params["quarter_increments"],
+                       n_amplitudes=params["n_amplitudes"] or None,
                        start_negative=params["direction"] < 0)
     stages = [Stage("gravity", params["gravity_increments"], pre,
                     frames=params["gravity_increments"]),
@@ -167,10 +170,17 @@ def main(argv=None):
     params = scene_params(PARAMS, FAST, sys.argv[1:] if argv is None else argv, __doc__)
     sim, hist, push = run(params)
     top = f"{sim.floors[-1].name}.ux"
+    # cycles of the half model: its energies with its own base shear (half the house's)
+    cycles = (energy_per_cycle(dict(hist, half_shear=0.5 * hist["base_shear"]), top, push,
+                               force="half_shear") if params["protocol"] == "cyclic" else None)
     finish(sim, params["out"], x=hist[top][push] / mm, y=hist["base_shear"][push] / kN,
            xlabel="top displacement (mm)", ylabel="base shear, whole house (kN)",
-           title=f"S7 terraced house, {params['protocol']}, direction {params['direction']:+d}")
+           title=f"S7 terraced house, {params['protocol']}, direction {params['direction']:+d}",
+           cycles=cycles)
     print(report(sim, hist, push))
+    if cycles:
+        print("cycles of the half model (base shear and energies half the house's):\n"
+              + cycle_text(cycles))
 
 
 if __name__ == "__main__":

@@ -44,7 +44,7 @@ def cycle_bounds(u):
     return list(zip(starts, ends))
 
 
-def energy_per_cycle(history, key, rows=None):
+def energy_per_cycle(history, key, rows=None, force=None):
     """Energy dissipated in each cycle of the control displacement ``history[key]``.
 
     Parameters
@@ -55,20 +55,31 @@ def energy_per_cycle(history, key, rows=None):
         the control displacement column (e.g. ``"beam.ux"``).
     rows : (n,) bool, optional
         the rows of the cyclic stage (default all).
+    force : str, optional
+        the force column that goes with ``key`` (e.g. ``"beam.fx"``): adds the cycle's peaks and
+        its equivalent viscous damping ratio.
 
     Returns
     -------
     list of dict
         per cycle: ``cycle`` (1-based), ``amplitude`` (max |u|, m), ``D_blocks``, ``D_joints``
         and ``D_total`` (J dissipated during the cycle), ``W_ext`` (J, net external work of
-        the cycle).
+        the cycle). With ``force``: ``u_max``, ``u_min`` (m, extreme displacements), ``F_max``,
+        ``F_min`` (largest and smallest force of the cycle, the column's unit) and ``xi_eq``,
+        the equivalent viscous damping ratio ``D_total / (pi (|F(u_max) u_max| + |F(u_min)
+        u_min|))`` (Jacobsen's ``E_D / (4 pi E_so)`` with the strain energy ``E_so`` of each
+        half cycle at its peak displacement; NaN for a cycle without displacement). The energies
+        are those of the whole model: give the force acting on it (a half model's own, not the
+        whole building's).
     """
-    for k in (key, "D_blocks", "D_joints", "W_ext"):
+    need = (key, "D_blocks", "D_joints", "W_ext") + ((force,) if force is not None else ())
+    for k in need:
         if k not in history:
             raise PostprocessError(f"energy_per_cycle: no history column {k!r}")
     sel = np.ones(len(history[key]), bool) if rows is None else np.asarray(rows, bool)
     u = np.asarray(history[key])[sel]
     cum = {k: np.asarray(history[k])[sel] for k in ("D_blocks", "D_joints", "W_ext")}
+    f = np.asarray(history[force])[sel] if force is not None else None
     first = np.flatnonzero(sel)[0]
     before = {k: (np.asarray(history[k])[first - 1] if first > 0 else 0.0) for k in cum}
     out = []
@@ -78,5 +89,22 @@ def energy_per_cycle(history, key, rows=None):
             start = v[a - 1] if a > 0 else before[k]
             row[k] = float(v[b - 1] - start)
         row["D_total"] = row["D_blocks"] + row["D_joints"]
+        if f is not None:
+            hi, lo = a + int(np.argmax(u[a:b])), a + int(np.argmin(u[a:b]))
+            row.update(u_max=float(u[hi]), u_min=float(u[lo]), F_max=float(f[a:b].max()),
+                       F_min=float(f[a:b].min()))
+            strain = abs(f[hi] * u[hi]) + abs(f[lo] * u[lo])
+            row["xi_eq"] = float(row["D_total"] / (np.pi * strain)) if strain > 0 else float("nan")
         out.append(row)
     return out
+
+
+def cycle_text(cycles, u_unit=1e-3, f_unit=1e3):
+    """Per-cycle table of :func:`energy_per_cycle` (with ``force``) as text lines:
+    displacements in ``u_unit`` m (default mm), forces in ``f_unit`` (default kN), energies J."""
+    lines = ["cycle  u_max  u_min   F_max   F_min  dissipated (joints / blocks) J  xi_eq"]
+    for c in cycles:
+        lines.append(f"{c['cycle']:5d} {c['u_max'] / u_unit:6.2f} {c['u_min'] / u_unit:6.2f} "
+                     f"{c['F_max'] / f_unit:7.2f} {c['F_min'] / f_unit:7.2f}  {c['D_total']:10.2f} "
+                     f"({c['D_joints']:.2f} / {c['D_blocks']:.2f})   {c['xi_eq']:.3f}")
+    return "\n".join(lines)

@@ -54,25 +54,27 @@ class Protocol:
         """Monotonic target in m."""
         return self.monotonic * self._scale(height)
 
-    def path(self, height=None, step=0.5 * mm, min_points=2, n_amplitudes=None,
+    def path(self, height=None, step=0.5 * mm, quarter_increments=2, n_amplitudes=None,
              start_negative=False):
         """Cyclic displacement targets (m), one per increment.
 
-        Each quarter cycle of amplitude ``a`` gets ``max(min_points, ceil(a / step))`` increments,
-        so small cycles are still resolved and large ones move at most ``step`` per increment.
+        Each quarter cycle of amplitude ``a`` gets ``max(quarter_increments, ceil(a / step))``
+        increments, so small cycles are still resolved (a sharp peak inside the first amplitude
+        needs several: docs/validation.md, S6) and large ones move at most ``step`` per increment.
         ``n_amplitudes`` keeps only the first amplitudes (None: all).
         """
         if not (math.isfinite(step) and step > 0):
             raise LoadingError(f"protocol {self.name}: step must be > 0 m, got {step!r}")
-        if int(min_points) < 1:
-            raise LoadingError(f"protocol {self.name}: min_points must be >= 1, got {min_points!r}")
+        if int(quarter_increments) < 1:
+            raise LoadingError(f"protocol {self.name}: quarter_increments must be >= 1, got "
+                               f"{quarter_increments!r}")
         amps = self.amplitudes_m(height)
         if n_amplitudes is not None:
             if not 1 <= int(n_amplitudes) <= amps.size:
                 raise LoadingError(f"protocol {self.name}: n_amplitudes must be in 1..{amps.size}, "
                                    f"got {n_amplitudes!r}")
             amps = amps[:int(n_amplitudes)]
-        parts = [cyclic_path([a], self.cycles, max(int(min_points), math.ceil(a / step - 1e-9)),
+        parts = [cyclic_path([a], self.cycles, max(int(quarter_increments), math.ceil(a / step - 1e-9)),
                              start_negative)
                  for a in amps]
         return np.concatenate(parts)

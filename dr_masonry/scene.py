@@ -85,8 +85,10 @@ def solver_summary(hist, rows):
             f" relaxation time {np.sum(hist['time_s']):.1f} s{cuts}")
 
 
-def finish(sim, out, x, y, xlabel, ylabel, title, reference=None, vtk=True):
-    """Write ``out.png`` (curve, optional reference (x, y, label)), ``out.csv`` and ``out_vtk/``.
+def finish(sim, out, x, y, xlabel, ylabel, title, reference=None, vtk=True, cycles=None):
+    """Write ``out.png`` (curve, optional reference (x, y, label)), ``out.csv``, ``out_vtk/``
+    and, for a cyclic run, ``out_cycles.csv`` (``cycles``: the list of
+    :func:`dr_masonry.postprocess.energy_per_cycle`; displacements m, forces N, energies J).
 
     ``sim`` is closed first so that the HDF5 result is complete. Returns the written paths.
     """
@@ -111,6 +113,11 @@ def finish(sim, out, x, y, xlabel, ylabel, title, reference=None, vtk=True):
     np.savetxt(out + ".csv", np.column_stack([hist[k] for k in keys]), delimiter=",",
                header=",".join(keys), comments="")
     paths = [out + ".png", out + ".csv"]
+    if cycles:
+        keys = list(cycles[0])
+        np.savetxt(out + "_cycles.csv", np.array([[c[k] for k in keys] for c in cycles]),
+                   delimiter=",", header=",".join(keys), comments="")
+        paths.append(out + "_cycles.csv")
     if vtk and sim.output is not None:
         from .viz.vtk_series import export_vtk
         paths.append(export_vtk(sim.output, out + "_vtk"))

@@ -71,7 +71,7 @@ def test_protocols_documented_amplitudes():
     assert p[-1] == pytest.approx(0.0, abs=1e-15)
     m = S4.monotonic_path(10, h)
     assert m[-1] == pytest.approx(0.025 * h) and np.all(np.diff(m) > 0)
-    assert len(S4.path(h, step=1.0, n_amplitudes=1)) == 2 * 4 * 2  # min_points per quarter
+    assert len(S4.path(h, step=1.0, n_amplitudes=1)) == 2 * 4 * 2  # quarter_increments (2) per quarter
 
 
 def test_protocol_bad_input():
@@ -170,6 +170,42 @@ def test_energy_per_cycle(slender_cyclic):
     total = (hist["D_blocks"] + hist["D_joints"])[-1] - (hist["D_blocks"] + hist["D_joints"])[first - 1]
     assert d.sum() == pytest.approx(total, rel=1e-12)
     assert min(d[2:]) > max(d[:2])
+    with_force = energy_per_cycle(hist, "beam.ux", push, force="beam.fx")
+    for c, e in zip(with_force, cycles):
+        assert {k: c[k] for k in e} == e           # the energies are the same
+        assert c["u_max"] == pytest.approx(c["amplitude"]) and c["u_min"] < 0.0
+        assert c["F_max"] > 0.0 > c["F_min"]
+        assert 0.0 <= c["xi_eq"] < 0.5
+
+
+def test_equivalent_damping_by_hand(tmp_path):
+    """One cycle 0 -> +2 -> -2 -> 0 mm, forces 15 and -14 kN at the peaks, 8 J dissipated:
+    xi_eq = 8 / (pi (15e3 * 2e-3 + 14e3 * 2e-3)) = 0.04390; the table goes to CSV by finish()."""
+    from dr_masonry.postprocess import cycle_text
+    from dr_masonry.scene import finish
+    u = np.array([0, 1, 2, 1, 0, -1, -2, -1, 0.0]) * 1e-3
+    f = np.array([0, 10, 15, 16, 0, -10, -14, -4, 0.0]) * 1e3    # largest force after the peak
+    h = dict(u=u, F=f, D_blocks=np.linspace(0, 2, 9), D_joints=np.linspace(0, 6, 9),
+             W_ext=np.linspace(0, 9, 9))
+    (c,) = energy_per_cycle(h, "u", force="F")
+    assert c["xi_eq"] == pytest.approx(8.0 / (math.pi * 58.0), rel=1e-12)
+    assert (c["u_max"], c["u_min"], c["F_max"], c["F_min"]) == (2e-3, -2e-3, 16e3, -14e3)
+    assert "0.044" in cycle_text([c]).splitlines()[1]
+    still = dict(h, u=np.zeros(9))
+    assert math.isnan(energy_per_cycle(still, "u", force="F")[0]["xi_eq"])
+    with pytest.raises(PostprocessError, match="'G'"):
+        energy_per_cycle(h, "u", force="G")
+
+    class Run:   # what finish() reads of a simulation
+        history, output = h, None
+
+        def close(self):
+            pass
+    out = str(tmp_path / "run")
+    paths = finish(Run(), out, u, f, "u", "F", "t", vtk=False, cycles=[c])
+    assert paths[-1] == out + "_cycles.csv"
+    table = np.genfromtxt(out + "_cycles.csv", delimiter=",", names=True)
+    assert table["xi_eq"] == pytest.approx(c["xi_eq"]) and table["D_total"] == pytest.approx(8.0)
 
 
 def test_cycle_bounds_of_protocols():
