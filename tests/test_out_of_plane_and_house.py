@@ -84,6 +84,24 @@ def test_s7_softens_and_balances(s7):
     assert np.all(np.abs(hist["balance_error"]) < 0.03)
 
 
+def test_s6_cyclic_pressure_and_suction(tmp_path, capsys):
+    """Tiny S6 wall, the 2 mm cycle (1 mm steps, cut where they need it) by the scene's ``main``:
+    the airbag pushes (pressure) to +2 mm and pulls (suction, negative factor) to -2 mm under
+    indirect control, and the cycle table holds the one cycle with its dissipation."""
+    from dr_masonry.results import open_result
+    out = tmp_path / "s6_cyclic"
+    out_of_plane_wall.main(["fast=true", "protocol=cyclic", "n_amplitudes=1", f"out={out}"])
+    hist = open_result(f"{out}.h5").history
+    push = hist["increment"] > out_of_plane_wall.FAST["pre_increments"]
+    u, F = hist["centre.uy"][push] * 1e3, hist["lambda"][push]
+    assert (u.max(), u.min(), u[-1]) == pytest.approx((2.0, -2.0, 0.0), abs=1e-6)
+    assert F[np.argmax(u)] > 0 > F[np.argmin(u)]
+    table = np.genfromtxt(f"{out}_cycles.csv", delimiter=",", names=True)
+    assert table["F_max"] == pytest.approx(F.max()) and table["F_min"] == pytest.approx(F.min())
+    assert table["D_joints"] > 0 and table["xi_eq"] > 0.0
+    assert "xi_eq" in capsys.readouterr().out
+
+
 def test_s7_reduced_cyclic_protocol(tmp_path, capsys):
     """Tiny S7 house, first cycle of the reduced cyclic protocol (+-2.5 mm, steps of 1.25 mm), run
     by the scene's ``main``: the floor forces follow the top displacement through both reversals
