@@ -59,8 +59,9 @@ class Protocol:
         """Cyclic displacement targets (m), one per increment.
 
         Each quarter cycle of amplitude ``a`` gets ``max(quarter_increments, ceil(a / step))``
-        increments, so small cycles are still resolved (a sharp peak inside the first amplitude
-        needs several: docs/validation.md, S6) and large ones move at most ``step`` per increment.
+        increments, so small cycles are still resolved and large ones move at most ``step`` per
+        increment (a peak inside a cycle needs steps well below its displacement: BENCHMARKS.md
+        section 31).
         ``n_amplitudes`` keeps only the first amplitudes (None: all).
         """
         if not (math.isfinite(step) and step > 0):
