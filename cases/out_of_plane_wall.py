@@ -73,7 +73,7 @@ PARAMS = dict(
 )
 #: overrides of ``fast=true``: a 4 x 10 brick wall, a few increments (seconds)
 FAST = dict(length=0.88, height=0.81, mesh="coarse", target=3 * mm, increments=6,
-            pre_increments=2, step=1.0 * mm, quarter_increments=2, n_amplitudes=2)
+            pre_increments=2, step=1.0 * mm, n_amplitudes=2)
 #: history columns of the curve (for studies): centre displacement, total lateral force
 CURVE = dict(x="centre.uy", y="lambda", stage="push", xscale=1e3, yscale=1e-3,
              xlabel="centre displacement (mm)", ylabel="lateral force (kN)")
