@@ -58,7 +58,8 @@ PARAMS = dict(
     drift=S5.monotonic,     # monotonic target, % of the height
     increments=60,          # increments of the monotonic push (30: peak 5.7 % low)
     grading=1.5,            # monotonic: i-th target = drift * (i / increments) ** grading
-    step=0.5 * mm,          # cyclic: largest displacement per increment, m
+    step=0.25 * mm,         # cyclic: largest displacement per increment, m (0.5 mm put the
+                            # peak of the 0.1 % cycles 6 % low: BENCHMARKS.md section 31)
     quarter_increments=2,   # cyclic: fewest increments per quarter cycle
     n_amplitudes=0,         # cyclic: run only the first n amplitudes (0: all)
     pre_increments=4,       # increments of the pre-compression stage
