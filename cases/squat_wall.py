@@ -187,7 +187,8 @@ def build(params, protocol=S5):
     if kind == "monotonic":
         path = protocol.monotonic_path(params["increments"], H, params["drift"], params["grading"])
     else:
-        path = protocol.path(H, step=params["step"], quarter_increments=params["quarter_increments"],
+        path = protocol.path(H, step=params["step"],
+                             quarter_increments=params["quarter_increments"],
                              n_amplitudes=params["n_amplitudes"] or None)
     stages = [Stage("precompression", params["pre_increments"], pre, frames=params["pre_increments"]),
               Stage("push", path.size, [Displacement(target=beam, dof="x", path=path, name="push")],

@@ -75,9 +75,8 @@ class Protocol:
                 raise LoadingError(f"protocol {self.name}: n_amplitudes must be in 1..{amps.size}, "
                                    f"got {n_amplitudes!r}")
             amps = amps[:int(n_amplitudes)]
-        parts = [cyclic_path([a], self.cycles, max(int(quarter_increments), math.ceil(a / step - 1e-9)),
-                             start_negative)
-                 for a in amps]
+        quarter = [max(int(quarter_increments), math.ceil(a / step - 1e-9)) for a in amps]
+        parts = [cyclic_path([a], self.cycles, k, start_negative) for a, k in zip(amps, quarter)]
         return np.concatenate(parts)
 
     def monotonic_path(self, increments, height=None, target=None, grading=1.0):

@@ -114,9 +114,9 @@ def finish(sim, out, x, y, xlabel, ylabel, title, reference=None, vtk=True, cycl
                header=",".join(keys), comments="")
     paths = [out + ".png", out + ".csv"]
     if cycles:
-        keys = list(cycles[0])
-        np.savetxt(out + "_cycles.csv", np.array([[c[k] for k in keys] for c in cycles]),
-                   delimiter=",", header=",".join(keys), comments="")
+        cols = list(cycles[0])
+        np.savetxt(out + "_cycles.csv", np.array([[c[k] for k in cols] for c in cycles]),
+                   delimiter=",", header=",".join(cols), comments="")
         paths.append(out + "_cycles.csv")
     if vtk and sim.output is not None:
         from .viz.vtk_series import export_vtk

@@ -992,7 +992,8 @@ class Simulation:
         d, mesh, cont = self.dyn, self.mesh, self.cont
         f = state_fields(d.U, mesh.s_old, cont.s_old)
         if cont.slave.size:
-            f.update(opening=cont.gaps[:, 0].copy(), slip=np.hypot(cont.gaps[:, 1], cont.gaps[:, 2]),
+            f.update(opening=cont.gaps[:, 0].copy(),
+                     slip=np.hypot(cont.gaps[:, 1], cont.gaps[:, 2]),
                      sigma=cont.trac[:, 0].copy(), tau=np.hypot(cont.trac[:, 1], cont.trac[:, 2]))
         return f
 

@@ -71,7 +71,7 @@ def test_protocols_documented_amplitudes():
     assert p[-1] == pytest.approx(0.0, abs=1e-15)
     m = S4.monotonic_path(10, h)
     assert m[-1] == pytest.approx(0.025 * h) and np.all(np.diff(m) > 0)
-    assert len(S4.path(h, step=1.0, n_amplitudes=1)) == 2 * 4 * 2  # quarter_increments (2) per quarter
+    assert len(S4.path(h, step=1.0, n_amplitudes=1)) == 2 * 4 * 2  # 2 per quarter
 
 
 def test_protocol_bad_input():
