@@ -1,0 +1,91 @@
+"""Where the energy-balance error of a run comes from: the joints' work rule, point by point.
+
+Runs scene ``scene`` (a module of ``cases/``) with the parameters ``args`` (``key=value`` words,
+as on its command line) and, at every committed row, compares each contact point's trapezoidal
+work, ``area * (t_prev + t) / 2 . (g - g_prev)`` with the local gap g (m) and tractions t (Pa) of
+the last and this committed state, with its change of stored energy plus dissipation (J). Their
+difference is the point's share of the run's balance error (``W_ext - E_stored - D``, the
+history column ``balance_error`` times the gross work) when the blocks stay elastic. It is split
+into points whose normal gap changed sign within the row (opened from compression, or closed)
+and the others: at the kink of the normal law (penalty kc closed, (1 - D) knn open) the
+trapezoidal rule misses ``0.5 (k_before - k_after) u0 u1`` per point, negative for an opening
+point, positive for a closing one, O(step^2) each (BENCHMARKS.md section 32).
+
+Rows whose contact set was re-detected (sliding) compare the points by index, as stored.
+
+Run: ``python benchmarks/balance_split.py [scene=terraced_house args="fast=true direction=-1"
+rows=0]`` (``rows`` > 0 stops after that many committed rows); writes ``benchmarks/out/
+balance_split.csv``.
+"""
+import importlib
+import types
+
+import numpy as np
+
+import common
+
+DEFAULTS = dict(scene="terraced_house", args="fast=true direction=-1", rows=0)
+
+
+class _Done(Exception):
+    """The rows asked for are committed."""
+
+
+def split_rows(sim, stages, rows=0):
+    """Run ``stages`` on ``sim``; returns one dict per committed row after the first: the row's
+    balance error (fraction of the gross work), its external work, and the joints' bookkeeping
+    error (J) in all, at points that changed between closed and open (and how many), and at the
+    others."""
+    from dr_masonry.kernels.joint_law import JS_DISS
+    out, prev = [], {}
+    commit = sim._commit
+
+    def recording_commit(self, info, elapsed, energies):
+        c = self.cont
+        state = dict(g=c.gaps.copy(), t=c.trac.copy(), psi=c.psi.copy(),
+                     dis=c.s_new[:, JS_DISS] * c.area)
+        w_before = self.energy["W_ext"]
+        commit(info, elapsed, energies)
+        if prev and prev["g"].shape == state["g"].shape:
+            work = c.area * (0.5 * (prev["t"] + state["t"]) * (state["g"] - prev["g"])).sum(axis=1)
+            err = work - (state["psi"] - prev["psi"]) - (state["dis"] - prev["dis"])
+            cross = np.sign(prev["g"][:, 0]) != np.sign(state["g"][:, 0])
+            out.append(dict(row=self.increment, balance_error=self.history["balance_error"][-1],
+                            W_gross=self.energy["W_gross"],
+                            dW_ext=self.energy["W_ext"] - w_before, joints=float(err.sum()),
+                            crossing=float(err[cross].sum()), n_crossing=int(cross.sum()),
+                            others=float(err[~cross].sum())))
+            print(" ".join(f"{k}={v:.5g}" for k, v in out[-1].items()), flush=True)
+        prev.update(state)
+        if rows and len(out) >= rows:
+            raise _Done
+
+    sim._commit = types.MethodType(recording_commit, sim)
+    try:
+        sim.run(stages)
+    except _Done:
+        pass
+    return out
+
+
+def main(argv=None):
+    params = common.start(DEFAULTS, __doc__, argv)
+    from dr_masonry.scene import scene_params
+    case = importlib.import_module(f"dr_masonry.cases.{params['scene']}")
+    p = scene_params(case.PARAMS, case.FAST, params["args"].split(), case.__doc__)
+    p.update(h5=None, progress=False)
+    sim, stages = case.build(p)
+    out = split_rows(sim, stages, params["rows"])
+    total = sum(r["joints"] for r in out)
+    cross = sum(r["crossing"] for r in out)
+    last = out[-1]
+    print(f"\nbalance error at the last row {last['balance_error']:.3%} of the gross work "
+          f"{last['W_gross']:.4g} J = {last['balance_error'] * last['W_gross']:.4g} J; joints' "
+          f"work rule {total:.4g} J, of which {cross:.4g} J at points that changed between "
+          f"closed and open")
+    common.report(out, "balance_split", f"Energy-balance error by joint points, {params['scene']} "
+                  f"{params['args']}")
+
+
+if __name__ == "__main__":
+    main()
