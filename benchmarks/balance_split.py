@@ -35,26 +35,42 @@ def split_rows(sim, stages, rows=0):
     """Run ``stages`` on ``sim``; returns one dict per committed row after the first: the row's
     balance error (fraction of the gross work), its external work, and the joints' bookkeeping
     error (J) in all, at points that changed between closed and open (and how many), and at the
-    others."""
+    others; the joints' error with their nodal forces and displacements instead of their local
+    tractions and gaps (``joints_nodal``: also counts the turning of their frames), and the blocks'
+    (the hexahedra's nodal trapezoidal work against their change of stored energy + dissipation).
+    The rows' sums of ``joints_nodal`` + ``blocks`` account for the change of the balance error
+    times the gross work, less what rigid reference points and supports contribute."""
     from dr_masonry.kernels.joint_law import JS_DISS
+    from dr_masonry.kernels.plastic_damage import MS_DISS
     out, prev = [], {}
     commit = sim._commit
 
     def recording_commit(self, info, elapsed, energies):
-        c = self.cont
+        c, m, d = self.cont, self.mesh, self.dyn
+        act = m.active
         state = dict(g=c.gaps.copy(), t=c.trac.copy(), psi=c.psi.copy(),
-                     dis=c.s_new[:, JS_DISS] * c.area)
+                     dis=c.s_new[:, JS_DISS] * c.area, fc=c.fbuf.reshape(-1, 5, 3).copy(),
+                     nodes=np.column_stack([c.slave, c.master]), U=d.U.copy(),
+                     fh=m.fbuf[act].copy(), eh=m.energy[act].copy(),
+                     dh=(m.s_new[act, :, MS_DISS] * m.wdet[act]).sum(axis=1))
         w_before = self.energy["W_ext"]
         commit(info, elapsed, energies)
         if prev and prev["g"].shape == state["g"].shape:
+            stored = (state["psi"] - prev["psi"]) + (state["dis"] - prev["dis"])
             work = c.area * (0.5 * (prev["t"] + state["t"]) * (state["g"] - prev["g"])).sum(axis=1)
-            err = work - (state["psi"] - prev["psi"]) - (state["dis"] - prev["dis"])
+            err = work - stored
+            du = state["U"] - prev["U"]
+            # the same in nodal forces and displacements: includes the turning of the frames
+            nodal = (0.5 * (prev["fc"] + state["fc"]) * du[state["nodes"]]).sum(axis=(1, 2)) - stored
+            hex_work = (0.5 * (prev["fh"] + state["fh"]) * du[m.conn[act]]).sum()
+            blocks = hex_work - (state["eh"] - prev["eh"]).sum() - (state["dh"] - prev["dh"]).sum()
             cross = np.sign(prev["g"][:, 0]) != np.sign(state["g"][:, 0])
             out.append(dict(row=self.increment, balance_error=self.history["balance_error"][-1],
                             W_gross=self.energy["W_gross"],
                             dW_ext=self.energy["W_ext"] - w_before, joints=float(err.sum()),
                             crossing=float(err[cross].sum()), n_crossing=int(cross.sum()),
-                            others=float(err[~cross].sum())))
+                            others=float(err[~cross].sum()), joints_nodal=float(nodal.sum()),
+                            blocks=float(blocks)))
             print(" ".join(f"{k}={v:.5g}" for k, v in out[-1].items()), flush=True)
         prev.update(state)
         if rows and len(out) >= rows:
@@ -76,13 +92,13 @@ def main(argv=None):
     p.update(h5=None, progress=False)
     sim, stages = case.build(p)
     out = split_rows(sim, stages, params["rows"])
-    total = sum(r["joints"] for r in out)
-    cross = sum(r["crossing"] for r in out)
+    total, cross, nodal, blocks = (sum(r[k] for r in out)
+                                   for k in ("joints", "crossing", "joints_nodal", "blocks"))
     last = out[-1]
     print(f"\nbalance error at the last row {last['balance_error']:.3%} of the gross work "
           f"{last['W_gross']:.4g} J = {last['balance_error'] * last['W_gross']:.4g} J; joints' "
           f"work rule {total:.4g} J, of which {cross:.4g} J at points that changed between "
-          f"closed and open")
+          f"closed and open; with nodal forces {nodal:.4g} J; blocks {blocks:.4g} J")
     common.report(out, "balance_split", f"Energy-balance error by joint points, {params['scene']} "
                   f"{params['args']}")
 
