@@ -983,8 +983,10 @@ class Simulation:
         if err > self.options.energy_tol and "balance" not in self._warned:
             self._warned.add("balance")
             warnings.warn(f"increment {self.increment}: energy balance error {err:.2%} exceeds "
-                          f"{self.options.energy_tol:.2%}; tighten SolverOptions.tol or use smaller "
-                          f"increments", RuntimeWarning)
+                          f"{self.options.energy_tol:.2%}; use smaller increments (the trapezoidal "
+                          f"work rule misses O(step^2) where joints open or close within an "
+                          f"increment: docs/file_format.md) or tighten SolverOptions.tol",
+                          RuntimeWarning)
 
     def fields(self):
         """Current field values for a frame: U, dt, dc per element, D/opening/slip per contact."""
