@@ -38,8 +38,10 @@ def split_rows(sim, stages, rows=0):
     others; the joints' error with their nodal forces and displacements instead of their local
     tractions and gaps (``joints_nodal``: also counts the turning of their frames), and the blocks'
     (the hexahedra's nodal trapezoidal work against their change of stored energy + dissipation).
-    The rows' sums of ``joints_nodal`` + ``blocks`` account for the change of the balance error
-    times the gross work, less what rigid reference points and supports contribute."""
+    ``residual``: the trapezoidal work of the out-of-balance forces left at the free DOFs (the
+    rows are converged to a tolerance, not to zero), the part of the external work that no
+    internal force absorbed. ``joints_nodal + blocks + residual`` is the row's change of the
+    balance error times the gross work, up to the rigid reference points' rotations."""
     from dr_masonry.kernels.joint_law import JS_DISS
     from dr_masonry.kernels.plastic_damage import MS_DISS
     out, prev = [], {}
@@ -55,6 +57,7 @@ def split_rows(sim, stages, rows=0):
                      dh=(m.s_new[act, :, MS_DISS] * m.wdet[act]).sum(axis=1))
         w_before = self.energy["W_ext"]
         commit(info, elapsed, energies)
+        state["res"] = np.where(d.free > 0, d.res, 0.0)   # (commit evaluates the residual)
         if prev and prev["g"].shape == state["g"].shape:
             stored = (state["psi"] - prev["psi"]) + (state["dis"] - prev["dis"])
             work = c.area * (0.5 * (prev["t"] + state["t"]) * (state["g"] - prev["g"])).sum(axis=1)
@@ -64,13 +67,14 @@ def split_rows(sim, stages, rows=0):
             nodal = (0.5 * (prev["fc"] + state["fc"]) * du[state["nodes"]]).sum(axis=(1, 2)) - stored
             hex_work = (0.5 * (prev["fh"] + state["fh"]) * du[m.conn[act]]).sum()
             blocks = hex_work - (state["eh"] - prev["eh"]).sum() - (state["dh"] - prev["dh"]).sum()
+            res_work = (0.5 * (prev["res"] + state["res"]) * du).sum()
             cross = np.sign(prev["g"][:, 0]) != np.sign(state["g"][:, 0])
             out.append(dict(row=self.increment, balance_error=self.history["balance_error"][-1],
                             W_gross=self.energy["W_gross"],
                             dW_ext=self.energy["W_ext"] - w_before, joints=float(err.sum()),
                             crossing=float(err[cross].sum()), n_crossing=int(cross.sum()),
                             others=float(err[~cross].sum()), joints_nodal=float(nodal.sum()),
-                            blocks=float(blocks)))
+                            blocks=float(blocks), residual=float(res_work)))
             print(" ".join(f"{k}={v:.5g}" for k, v in out[-1].items()), flush=True)
         prev.update(state)
         if rows and len(out) >= rows:
@@ -92,13 +96,14 @@ def main(argv=None):
     p.update(h5=None, progress=False)
     sim, stages = case.build(p)
     out = split_rows(sim, stages, params["rows"])
-    total, cross, nodal, blocks = (sum(r[k] for r in out)
-                                   for k in ("joints", "crossing", "joints_nodal", "blocks"))
+    total, cross, nodal, blocks, resw = (sum(r[k] for r in out) for k in (
+        "joints", "crossing", "joints_nodal", "blocks", "residual"))
     last = out[-1]
     print(f"\nbalance error at the last row {last['balance_error']:.3%} of the gross work "
           f"{last['W_gross']:.4g} J = {last['balance_error'] * last['W_gross']:.4g} J; joints' "
           f"work rule {total:.4g} J, of which {cross:.4g} J at points that changed between "
-          f"closed and open; with nodal forces {nodal:.4g} J; blocks {blocks:.4g} J")
+          f"closed and open; with nodal forces {nodal:.4g} J; blocks {blocks:.4g} J; out-of-balance "
+          f"forces {resw:.4g} J")
     common.report(out, "balance_split", f"Energy-balance error by joint points, {params['scene']} "
                   f"{params['args']}")
 
