@@ -5,11 +5,13 @@ as on its command line) and, at every committed row, compares each contact point
 work, ``area * (t_prev + t) / 2 . (g - g_prev)`` with the local gap g (m) and tractions t (Pa) of
 the last and this committed state, with its change of stored energy plus dissipation (J). Their
 difference is the point's share of the run's balance error (``W_ext - E_stored - D``, the
-history column ``balance_error`` times the gross work) when the blocks stay elastic. It is split
-into points whose normal gap changed sign within the row (opened from compression, or closed)
-and the others: at the kink of the normal law (penalty kc closed, (1 - D) knn open) the
-trapezoidal rule misses ``0.5 (k_before - k_after) u0 u1`` per point, negative for an opening
-point, positive for a closing one, O(step^2) each (BENCHMARKS.md section 32).
+history column ``balance_error`` times the gross work). It is split into points whose normal gap
+changed sign within the row (opened from compression, or closed) and the others: at the kink of
+the normal law (penalty kc closed, (1 - D) knn open) the trapezoidal rule misses
+``0.5 (k_before - k_after) u0 u1`` per point, negative for an opening point, positive for a
+closing one, O(step^2) each (BENCHMARKS.md section 32). The same with the points' nodal forces
+and displacements (which also counts the turning of their frames), the hexahedra's share, and the
+work of the out-of-balance forces left at convergence add up to the row's balance error.
 
 Rows whose contact set was re-detected (sliding) compare the points by index, as stored.
 
