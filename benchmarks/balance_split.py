@@ -70,12 +70,16 @@ def split_rows(sim, stages, rows=0):
             hex_work = (0.5 * (prev["fh"] + state["fh"]) * du[m.conn[act]]).sum()
             blocks = hex_work - (state["eh"] - prev["eh"]).sum() - (state["dh"] - prev["dh"]).sum()
             res_work = (0.5 * (prev["res"] + state["res"]) * du).sum()
+            # points re-paired by the sliding check (another master quad) since the last row
+            moved = np.any(prev["nodes"] != state["nodes"], axis=1)
             cross = np.sign(prev["g"][:, 0]) != np.sign(state["g"][:, 0])
             out.append(dict(row=self.increment, balance_error=self.history["balance_error"][-1],
                             W_gross=self.energy["W_gross"],
                             dW_ext=self.energy["W_ext"] - w_before, joints=float(err.sum()),
                             crossing=float(err[cross].sum()), n_crossing=int(cross.sum()),
                             others=float(err[~cross].sum()), joints_nodal=float(nodal.sum()),
+                            n_repaired=int(moved.sum()),
+                            nodal_minus_local_repaired=float((nodal - err)[moved].sum()),
                             blocks=float(blocks), residual=float(res_work)))
             print(" ".join(f"{k}={v:.5g}" for k, v in out[-1].items()), flush=True)
         prev.update(state)
