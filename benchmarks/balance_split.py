@@ -72,6 +72,8 @@ def split_rows(sim, stages, rows=0):
             res_work = (0.5 * (prev["res"] + state["res"]) * du).sum()
             # points re-paired by the sliding check (another master quad) since the last row
             moved = np.any(prev["nodes"] != state["nodes"], axis=1)
+            # slave nodes off their master face: paired with a tangential offset gap0
+            off_face = np.abs(c.gap0).max(axis=1) > 1e-9
             cross = np.sign(prev["g"][:, 0]) != np.sign(state["g"][:, 0])
             out.append(dict(row=self.increment, balance_error=self.history["balance_error"][-1],
                             W_gross=self.energy["W_gross"],
@@ -80,6 +82,8 @@ def split_rows(sim, stages, rows=0):
                             others=float(err[~cross].sum()), joints_nodal=float(nodal.sum()),
                             n_repaired=int(moved.sum()),
                             nodal_minus_local_repaired=float((nodal - err)[moved].sum()),
+                            n_off_face=int(off_face.sum()),
+                            nodal_minus_local_off_face=float((nodal - err)[off_face].sum()),
                             blocks=float(blocks), residual=float(res_work)))
             print(" ".join(f"{k}={v:.5g}" for k, v in out[-1].items()), flush=True)
         prev.update(state)
