@@ -416,7 +416,8 @@ class Simulation:
         if c.slave.size == 0:
             return self._rowsum_solid
         return self._rowsum_solid + contact_rowsum(c.slave, c.master, c.xi, c.area,
-                                                   self._kbound[c.law], self.model.n_nodes)
+                                                   self._kbound[c.law], self.model.n_nodes,
+                                                   self.model.nodes, c.gap0)
 
     def _masses(self, rowsum):
         """Inverse fictitious masses from the row sums ``rowsum`` (n_nodes,) N/m: of the nodes

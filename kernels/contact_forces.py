@@ -11,6 +11,9 @@ from .contact_frame import contact_frame
 from .joint_law import JS_D, JS_DP1, JS_DP2, P_KC, P_KNN, P_KSS, joint_point
 
 CHUNK = 64  #: contact points per parallel task (scratch arrays allocated once per task)
+#: a point whose stored offset gap0 exceeds this (m) gets the forces of its frame's turning
+#: (:func:`offset_forces`); below it the separation is the gap itself and the term is negligible
+OFFSET_TOL = 1e-9
 
 
 @ijit
@@ -28,6 +31,76 @@ def joint_energy(p, gap, s):
     e += 0.5 * (1.0 - d) * p[P_KSS] * (gap[1] ** 2 + gap[2] ** 2)
     e += 0.5 * d * p[P_KSS] * (e1 * e1 + e2 * e2)
     return e
+
+
+@ijit
+def _cross(a0, a1, a2, b0, b1, b2):
+    return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+
+
+@ijit
+def _dnormal(m0, m1, m2, jac, n0, n1, n2, v0, v1, v2):
+    """w = d(n . v) / d(a1 x a2) = (v - n (n . v)) / |a1 x a2| for the fixed vector v."""
+    nv = n0 * v0 + n1 * v1 + n2 * v2
+    return (v0 - n0 * nv) / jac, (v1 - n1 * nv) / jac, (v2 - n2 * nv) / jac
+
+
+@ijit
+def offset_forces(xq, r, s, d, frame, t, ar, fbuf, row):
+    """Add to the master rows ``fbuf[row:row + 4]`` the forces of the frame's turning,
+    ``ar * sum_k t_k d(frame_k . d) / d x_a`` (N), for the separation ``d`` (3,) = x_slave -
+    x_master (m): with them the point's forces are the gradient of its stored energy and carry no
+    couple. First order in |d|: needed where the slave node lies off its master face (gap0 holds
+    the offset, up to a brick's width), negligible where d is the gap itself.
+
+    ``xq`` (4, 3) master quad, (r, s) the point's natural coordinates, ``frame`` rows [n, t1, t2]
+    from :func:`contact_frame`, ``t`` (3,) tractions [sigma, tau1, tau2] Pa, ``ar`` area m^2.
+    """
+    a10 = 0.25 * ((1.0 - s) * (xq[1, 0] - xq[0, 0]) + (1.0 + s) * (xq[2, 0] - xq[3, 0]))
+    a11 = 0.25 * ((1.0 - s) * (xq[1, 1] - xq[0, 1]) + (1.0 + s) * (xq[2, 1] - xq[3, 1]))
+    a12 = 0.25 * ((1.0 - s) * (xq[1, 2] - xq[0, 2]) + (1.0 + s) * (xq[2, 2] - xq[3, 2]))
+    a20 = 0.25 * ((1.0 - r) * (xq[3, 0] - xq[0, 0]) + (1.0 + r) * (xq[2, 0] - xq[1, 0]))
+    a21 = 0.25 * ((1.0 - r) * (xq[3, 1] - xq[0, 1]) + (1.0 + r) * (xq[2, 1] - xq[1, 1]))
+    a22 = 0.25 * ((1.0 - r) * (xq[3, 2] - xq[0, 2]) + (1.0 + r) * (xq[2, 2] - xq[1, 2]))
+    m0, m1, m2 = _cross(a10, a11, a12, a20, a21, a22)
+    jac = np.sqrt(m0 * m0 + m1 * m1 + m2 * m2)
+    la1 = np.sqrt(a10 * a10 + a11 * a11 + a12 * a12)
+    n0, n1, n2 = frame[0, 0], frame[0, 1], frame[0, 2]
+    e0, e1, e2 = frame[1, 0], frame[1, 1], frame[1, 2]
+    d0, d1, d2 = d[0], d[1], d[2]
+    # normal row: d(n . d)/da1 = a2 x w, d/da2 = w x a1, w = d(n . d)/dm
+    w0, w1, w2 = _dnormal(m0, m1, m2, jac, n0, n1, n2, d0, d1, d2)
+    g10, g11, g12 = _cross(a20, a21, a22, w0, w1, w2)
+    g20, g21, g22 = _cross(w0, w1, w2, a10, a11, a12)
+    g10, g11, g12, g20, g21, g22 = (t[0] * g10, t[0] * g11, t[0] * g12, t[0] * g20, t[0] * g21,
+                                    t[0] * g22)
+    # first tangent t1 = a1 / |a1|: d(t1 . v)/da1 = (v - t1 (t1 . v)) / |a1|
+    ed = e0 * d0 + e1 * d1 + e2 * d2
+    g10 += t[1] * (d0 - e0 * ed) / la1
+    g11 += t[1] * (d1 - e1 * ed) / la1
+    g12 += t[1] * (d2 - e2 * ed) / la1
+    # second tangent t2 = n x t1: t2 . d = n . (t1 x d) = t1 . (d x n)
+    u0, u1, u2 = _cross(e0, e1, e2, d0, d1, d2)
+    w0, w1, w2 = _dnormal(m0, m1, m2, jac, n0, n1, n2, u0, u1, u2)
+    h10, h11, h12 = _cross(a20, a21, a22, w0, w1, w2)
+    h20, h21, h22 = _cross(w0, w1, w2, a10, a11, a12)
+    q0, q1, q2 = _cross(d0, d1, d2, n0, n1, n2)
+    eq = e0 * q0 + e1 * q1 + e2 * q2
+    g10 += t[2] * (h10 + (q0 - e0 * eq) / la1)
+    g11 += t[2] * (h11 + (q1 - e1 * eq) / la1)
+    g12 += t[2] * (h12 + (q2 - e2 * eq) / la1)
+    g20 += t[2] * h20
+    g21 += t[2] * h21
+    g22 += t[2] * h22
+    # a1 = sum_a dN_a/dr x_a, a2 = sum_a dN_a/ds x_a
+    for a in range(4):
+        ca = -1.0 if a == 0 or a == 3 else 1.0   # corner r of node a
+        cb = -1.0 if a == 0 or a == 1 else 1.0   # corner s
+        dr = 0.25 * ca * (1.0 + cb * s)
+        ds = 0.25 * cb * (1.0 + ca * r)
+        fbuf[row + a, 0] += ar * (g10 * dr + g20 * ds)
+        fbuf[row + a, 1] += ar * (g11 * dr + g21 * ds)
+        fbuf[row + a, 2] += ar * (g12 * dr + g22 * ds)
 
 
 @pjit
@@ -89,19 +162,43 @@ def contact_chunk(lo, hi, X, U, slave, master, xi, area, law, lparams, gap0, s_o
             fbuf[5 * c + 2, k] = -n1 * f
             fbuf[5 * c + 3, k] = -n2 * f
             fbuf[5 * c + 4, k] = -n3 * f
+        if abs(gap0[c, 0]) + abs(gap0[c, 1]) + abs(gap0[c, 2]) > OFFSET_TOL:
+            for k in range(3):
+                xs[k] -= xm[k]   # the separation d = x_slave - x_master
+            offset_forces(xq, r, s, xs, frame, t, area[c], fbuf, 5 * c + 1)
 
 
-def contact_rowsum(slave, master, xi, area, kbound, n_nodes):
+def contact_rowsum(slave, master, xi, area, kbound, n_nodes, X=None, gap0=None):
     """Gershgorin row sums (N/m) per node of the contact springs, stiffness bound ``kbound`` (nc,) Pa/m.
 
     The spring couples the slave with weight 1 and master a with -N_a (sum N_a = 1), so the absolute
-    row sum is 2 k A at the slave and 2 k A N_a at master node a.
+    row sum is 2 k A at the slave and 2 k A N_a at master node a. A point off its master face
+    (|gap0| > ``OFFSET_TOL``; ``X`` (n_nodes, 3) m and ``gap0`` (nc, 3) m given) also moves with
+    the turning of the face over its offset (:func:`offset_forces`): master a then weighs
+    w_a = N_a + 2 |gap0| (|dN_a/dr| / |a1| + |dN_a/ds| / |a2|), and the row sums are
+    k A (1 + W) at the slave and k A w_a (1 + W) at master a, W = sum w_a.
     """
     r, s = xi[:, 0], xi[:, 1]
     shp = 0.25 * np.column_stack([(1 - r) * (1 - s), (1 + r) * (1 - s), (1 + r) * (1 + s),
                                   (1 - r) * (1 + s)])
     ka = 2.0 * kbound * area
-    out = np.bincount(slave, weights=ka, minlength=n_nodes)
-    out += np.bincount(master.ravel(), weights=(ka[:, None] * np.abs(shp)).ravel(),
-                       minlength=n_nodes)
+    w_slave = ka.copy()
+    w_master = ka[:, None] * np.abs(shp)
+    if X is not None and gap0 is not None:
+        off = np.nonzero(np.abs(gap0).sum(axis=1) > OFFSET_TOL)[0]
+        if off.size:
+            ro, so = r[off], s[off]
+            dnr = 0.25 * np.column_stack([-(1 - so), 1 - so, 1 + so, -(1 + so)])
+            dns = 0.25 * np.column_stack([-(1 - ro), -(1 + ro), 1 + ro, 1 - ro])
+            xq = X[master[off]]
+            la1 = np.linalg.norm(np.einsum("na,naj->nj", dnr, xq), axis=1)
+            la2 = np.linalg.norm(np.einsum("na,naj->nj", dns, xq), axis=1)
+            arm = 2.0 * np.linalg.norm(gap0[off], axis=1)
+            w = (np.abs(shp[off]) + arm[:, None] * (np.abs(dnr) / la1[:, None]
+                                                   + np.abs(dns) / la2[:, None]))
+            big = 1.0 + w.sum(axis=1)
+            w_slave[off] = 0.5 * ka[off] * big
+            w_master[off] = 0.5 * (ka[off] * big)[:, None] * w
+    out = np.bincount(slave, weights=w_slave, minlength=n_nodes)
+    out += np.bincount(master.ravel(), weights=w_master.ravel(), minlength=n_nodes)
     return out
