@@ -9,9 +9,10 @@ history column ``balance_error`` times the gross work). It is split into points 
 changed sign within the row (opened from compression, or closed) and the others: at the kink of
 the normal law (penalty kc closed, (1 - D) knn open) the trapezoidal rule's work minus the
 energy the point stores is ``0.5 (k_before - k_after) u0 u1``, negative for an opening point,
-positive for a closing one, O(step^2) each (BENCHMARKS.md section 32). The same with the points' nodal forces
-and displacements (which also counts the turning of their frames), the hexahedra's share, and the
-work of the out-of-balance forces left at convergence add up to the row's balance error.
+positive for a closing one, O(step^2) each (BENCHMARKS.md section 32). The same with the
+points' nodal forces and displacements (which also counts the turning of their frames), the
+hexahedra's share, and the work of the out-of-balance forces left at convergence add up to the
+row's balance error.
 
 Rows whose contact set was re-detected (sliding) compare the points by index, as stored.
 

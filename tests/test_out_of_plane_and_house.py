@@ -89,9 +89,8 @@ def test_s7_energy_balance_converges_with_the_step(s7):
     its ends) at the kink of the joints' normal law: for a point that opens within a step, from
     the compression penalty kc to (1 - D) knn, the rule's work minus the energy it stores is
     0.5 (kc - (1 - D) knn) u0 u1 < 0 (u0 < 0 < u1), O(step^2) per point (BENCHMARKS.md section
-    32). Halving the steps
-    of the tiny house's push (the same path to 3 mm) must shrink it by more than the factor 2 of
-    a first-order error: measured 0.95 % -> 0.08 %."""
+    32). Halving the steps of the tiny house's push (the same path to 3 mm) must shrink it by
+    more than the factor 2 of a first-order error: measured 0.95 % -> 0.08 %."""
     _, hist5, push5 = s7
     _, hist10, push10 = terraced_house.run(fast(terraced_house, increments=10))
     u5, u10 = hist5["floor2.ux"][push5], hist10["floor2.ux"][push10]
