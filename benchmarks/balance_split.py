@@ -67,7 +67,8 @@ def split_rows(sim, stages, rows=0):
             err = work - stored
             du = state["U"] - prev["U"]
             # the same in nodal forces and displacements: includes the turning of the frames
-            nodal = (0.5 * (prev["fc"] + state["fc"]) * du[state["nodes"]]).sum(axis=(1, 2)) - stored
+            nodal = ((0.5 * (prev["fc"] + state["fc"]) * du[state["nodes"]]).sum(axis=(1, 2))
+                     - stored)
             hex_work = (0.5 * (prev["fh"] + state["fh"]) * du[m.conn[act]]).sum()
             blocks = hex_work - (state["eh"] - prev["eh"]).sum() - (state["dh"] - prev["dh"]).sum()
             res_work = (0.5 * (prev["res"] + state["res"]) * du).sum()
@@ -113,8 +114,8 @@ def main(argv=None):
     print(f"\nbalance error at the last row {last['balance_error']:.3%} of the gross work "
           f"{last['W_gross']:.4g} J = {last['balance_error'] * last['W_gross']:.4g} J; joints' "
           f"work rule {total:.4g} J, of which {cross:.4g} J at points that changed between "
-          f"closed and open; with nodal forces {nodal:.4g} J; blocks {blocks:.4g} J; out-of-balance "
-          f"forces {resw:.4g} J")
+          f"closed and open; with nodal forces {nodal:.4g} J; blocks {blocks:.4g} J; "
+          f"out-of-balance forces {resw:.4g} J")
     common.report(out, "balance_split", f"Energy-balance error by joint points, {params['scene']} "
                   f"{params['args']}")
 
