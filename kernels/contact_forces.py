@@ -7,7 +7,7 @@ as internal force +F on the slave node and -N_a F on master node a. Residual = e
 import numpy as np
 
 from .config import ijit, pjit, prange
-from .contact_frame import contact_frame
+from .contact_frame import contact_frame, quad_tangents
 from .joint_law import JS_D, JS_DP1, JS_DP2, P_KC, P_KNN, P_KSS, joint_point
 
 CHUNK = 64  #: contact points per parallel task (scratch arrays allocated once per task)
@@ -39,14 +39,14 @@ def _cross(a0, a1, a2, b0, b1, b2):
 
 
 @ijit
-def _dnormal(m0, m1, m2, jac, n0, n1, n2, v0, v1, v2):
+def _dnormal(jac, n0, n1, n2, v0, v1, v2):
     """w = d(n . v) / d(a1 x a2) = (v - n (n . v)) / |a1 x a2| for the fixed vector v."""
     nv = n0 * v0 + n1 * v1 + n2 * v2
     return (v0 - n0 * nv) / jac, (v1 - n1 * nv) / jac, (v2 - n2 * nv) / jac
 
 
 @ijit
-def offset_forces(xq, r, s, d, frame, t, ar, fbuf, row):
+def offset_forces(xq, r, s, d, frame, jac, t, ar, fbuf, row):
     """Add to the master rows ``fbuf[row:row + 4]`` the forces of the frame's turning,
     ``ar * sum_k t_k d(frame_k . d) / d x_a`` (N), for the separation ``d`` (3,) = x_slave -
     x_master (m): with them the point's forces are the gradient of its stored energy and carry no
@@ -54,22 +54,16 @@ def offset_forces(xq, r, s, d, frame, t, ar, fbuf, row):
     the offset, up to a brick's width), negligible where d is the gap itself.
 
     ``xq`` (4, 3) master quad, (r, s) the point's natural coordinates, ``frame`` rows [n, t1, t2]
-    from :func:`contact_frame`, ``t`` (3,) tractions [sigma, tau1, tau2] Pa, ``ar`` area m^2.
+    and ``jac`` = |a1 x a2| from :func:`contact_frame`, ``t`` (3,) tractions [sigma, tau1, tau2]
+    Pa, ``ar`` area m^2.
     """
-    a10 = 0.25 * ((1.0 - s) * (xq[1, 0] - xq[0, 0]) + (1.0 + s) * (xq[2, 0] - xq[3, 0]))
-    a11 = 0.25 * ((1.0 - s) * (xq[1, 1] - xq[0, 1]) + (1.0 + s) * (xq[2, 1] - xq[3, 1]))
-    a12 = 0.25 * ((1.0 - s) * (xq[1, 2] - xq[0, 2]) + (1.0 + s) * (xq[2, 2] - xq[3, 2]))
-    a20 = 0.25 * ((1.0 - r) * (xq[3, 0] - xq[0, 0]) + (1.0 + r) * (xq[2, 0] - xq[1, 0]))
-    a21 = 0.25 * ((1.0 - r) * (xq[3, 1] - xq[0, 1]) + (1.0 + r) * (xq[2, 1] - xq[1, 1]))
-    a22 = 0.25 * ((1.0 - r) * (xq[3, 2] - xq[0, 2]) + (1.0 + r) * (xq[2, 2] - xq[1, 2]))
-    m0, m1, m2 = _cross(a10, a11, a12, a20, a21, a22)
-    jac = np.sqrt(m0 * m0 + m1 * m1 + m2 * m2)
+    a10, a11, a12, a20, a21, a22 = quad_tangents(xq, r, s)
     la1 = np.sqrt(a10 * a10 + a11 * a11 + a12 * a12)
     n0, n1, n2 = frame[0, 0], frame[0, 1], frame[0, 2]
     e0, e1, e2 = frame[1, 0], frame[1, 1], frame[1, 2]
     d0, d1, d2 = d[0], d[1], d[2]
     # normal row: d(n . d)/da1 = a2 x w, d/da2 = w x a1, w = d(n . d)/dm
-    w0, w1, w2 = _dnormal(m0, m1, m2, jac, n0, n1, n2, d0, d1, d2)
+    w0, w1, w2 = _dnormal(jac, n0, n1, n2, d0, d1, d2)
     g10, g11, g12 = _cross(a20, a21, a22, w0, w1, w2)
     g20, g21, g22 = _cross(w0, w1, w2, a10, a11, a12)
     g10, g11, g12, g20, g21, g22 = (t[0] * g10, t[0] * g11, t[0] * g12, t[0] * g20, t[0] * g21,
@@ -81,7 +75,7 @@ def offset_forces(xq, r, s, d, frame, t, ar, fbuf, row):
     g12 += t[1] * (d2 - e2 * ed) / la1
     # second tangent t2 = n x t1: t2 . d = n . (t1 x d) = t1 . (d x n)
     u0, u1, u2 = _cross(e0, e1, e2, d0, d1, d2)
-    w0, w1, w2 = _dnormal(m0, m1, m2, jac, n0, n1, n2, u0, u1, u2)
+    w0, w1, w2 = _dnormal(jac, n0, n1, n2, u0, u1, u2)
     h10, h11, h12 = _cross(a20, a21, a22, w0, w1, w2)
     h20, h21, h22 = _cross(w0, w1, w2, a10, a11, a12)
     q0, q1, q2 = _cross(d0, d1, d2, n0, n1, n2)
@@ -141,7 +135,7 @@ def contact_chunk(lo, hi, X, U, slave, master, xi, area, law, lparams, gap0, s_o
             xs[k] = X[slave[c], k] + U[slave[c], k]
         r = xi[c, 0]
         s = xi[c, 1]
-        contact_frame(xq, r, s, xm, frame)
+        jac = contact_frame(xq, r, s, xm, frame)
         for a in range(3):
             ga = ((xs[0] - xm[0]) * frame[a, 0] + (xs[1] - xm[1]) * frame[a, 1]
                   + (xs[2] - xm[2]) * frame[a, 2]) - gap0[c, a]
@@ -165,7 +159,7 @@ def contact_chunk(lo, hi, X, U, slave, master, xi, area, law, lparams, gap0, s_o
         if abs(gap0[c, 0]) + abs(gap0[c, 1]) + abs(gap0[c, 2]) > OFFSET_TOL:
             for k in range(3):
                 xs[k] -= xm[k]   # the separation d = x_slave - x_master
-            offset_forces(xq, r, s, xs, frame, t, area[c], fbuf, 5 * c + 1)
+            offset_forces(xq, r, s, xs, frame, jac, t, area[c], fbuf, 5 * c + 1)
 
 
 def contact_rowsum(slave, master, xi, area, kbound, n_nodes, X=None, gap0=None):

@@ -21,23 +21,28 @@ def quad_shape(r, s, out):
 
 
 @ijit
+def quad_tangents(xq, r, s):
+    """Tangents a1 = dx/dr and a2 = dx/ds (m per unit natural length) of quad ``xq`` (4, 3) at
+    (r, s), as six scalars (a1x, a1y, a1z, a2x, a2y, a2z): no allocation in the hot loop."""
+    a10 = 0.25 * ((1.0 - s) * (xq[1, 0] - xq[0, 0]) + (1.0 + s) * (xq[2, 0] - xq[3, 0]))
+    a11 = 0.25 * ((1.0 - s) * (xq[1, 1] - xq[0, 1]) + (1.0 + s) * (xq[2, 1] - xq[3, 1]))
+    a12 = 0.25 * ((1.0 - s) * (xq[1, 2] - xq[0, 2]) + (1.0 + s) * (xq[2, 2] - xq[3, 2]))
+    a20 = 0.25 * ((1.0 - r) * (xq[3, 0] - xq[0, 0]) + (1.0 + r) * (xq[2, 0] - xq[1, 0]))
+    a21 = 0.25 * ((1.0 - r) * (xq[3, 1] - xq[0, 1]) + (1.0 + r) * (xq[2, 1] - xq[1, 1]))
+    a22 = 0.25 * ((1.0 - r) * (xq[3, 2] - xq[0, 2]) + (1.0 + r) * (xq[2, 2] - xq[1, 2]))
+    return a10, a11, a12, a20, a21, a22
+
+
+@ijit
 def contact_frame(xq, r, s, xm, frame):
     """Master point ``xm`` (3,) and frame rows [n, t1, t2] ``frame`` (3, 3) of quad ``xq`` (4, 3) at (r, s).
 
     Returns the area Jacobian |a1 x a2| (m^2 per unit natural area).
     """
-    a10 = a11 = a12 = a20 = a21 = a22 = 0.0  # scalars: no allocation in the hot loop
     for k in range(3):
         xm[k] = 0.25 * ((1.0 - r) * (1.0 - s) * xq[0, k] + (1.0 + r) * (1.0 - s) * xq[1, k]
                         + (1.0 + r) * (1.0 + s) * xq[2, k] + (1.0 - r) * (1.0 + s) * xq[3, k])
-        b1 = 0.25 * ((1.0 - s) * (xq[1, k] - xq[0, k]) + (1.0 + s) * (xq[2, k] - xq[3, k]))
-        b2 = 0.25 * ((1.0 - r) * (xq[3, k] - xq[0, k]) + (1.0 + r) * (xq[2, k] - xq[1, k]))
-        if k == 0:
-            a10, a20 = b1, b2
-        elif k == 1:
-            a11, a21 = b1, b2
-        else:
-            a12, a22 = b1, b2
+    a10, a11, a12, a20, a21, a22 = quad_tangents(xq, r, s)
     nx = a11 * a22 - a12 * a21
     ny = a12 * a20 - a10 * a22
     nz = a10 * a21 - a11 * a20
