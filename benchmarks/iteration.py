@@ -5,7 +5,8 @@ state with damaged joints, then times ``relax`` for ``iters`` iterations with to
 batches; best and median per iteration) and its parallel pieces: ``element_and_contact_forces``
 (hexahedra and contact points, one region), ``gather_pair`` (node forces, one region) and
 ``internal_forces`` (both, plus the energy sums); ``rest`` = iteration - internal forces (the
-serial residual, damping and update). Every (threads, policy) setting runs in a process of its
+serial residual, damping and update); ``forces_full_update``: the forces again with every element
+through the full Gauss-point state update (the pristine elements' skip switched off). Every (threads, policy) setting runs in a process of its
 own, since OpenMP reads ``OMP_WAIT_POLICY`` when it starts. BENCHMARKS.md section 16.
 
 Run: ``python benchmarks/iteration.py [threads=1,2 policies=PASSIVE,ACTIVE rows=8 iters=400
@@ -68,8 +69,18 @@ def child(params):
     us = 1e6 / n
     out = dict(threads=numba.get_num_threads(), policy=os.environ.get("OMP_WAIT_POLICY"),
                nodes=d.U.shape[0], hexahedra=m.active.shape[0], contacts=c.slave.shape[0])
+    pristine = m.pristine.copy()
+
+    def full_update():
+        """The forces with every element through the full state update (no pristine ones)."""
+        m.pristine[:] = 0
+        R.element_and_contact_forces(d.X, d.U, m, c)
+        m.pristine[:] = pristine
+
+    out["pristine_elements"] = int(pristine[m.active].sum())
     for name, f in (("iteration", iterations),
                     ("forces", pieces(lambda: R.element_and_contact_forces(d.X, d.U, m, c))),
+                    ("forces_full_update", pieces(full_update)),
                     ("gather", pieces(lambda: gather_pair(m.fbuf.reshape((-1, 3)), m.ptr, m.rows,
                                                           c.fbuf, c.ptr, c.rows, d.fint))),
                     ("internal_forces", pieces(lambda: R.internal_forces(m, c, d)))):

@@ -74,8 +74,9 @@ def displacement(sim, strain, jump, seed=0):
     return U + t[m.node_block]
 
 
-def hex_args(sim, U, elastic):
-    """Arguments of ``hex_forces`` for every element with the given material."""
+def hex_args(sim, U, elastic, virgin=True):
+    """Arguments of ``hex_forces`` for every element with the given material (``virgin``: the
+    elements marked pristine, so that in their elastic range they skip the state update)."""
     from dr_masonry import PlasticDamage
     me = sim.mesh
     mat = PlasticDamage.elastic(4800e6, 0.17, 1800.0) if elastic else PlasticDamage.reference()
@@ -83,7 +84,8 @@ def hex_args(sim, U, elastic):
     s0 = np.repeat(np.repeat(mat.initial_state()[None, None, :], me.conn.shape[0], 0), 8, 1)
     emat = np.zeros(me.conn.shape[0], dtype=np.int64)
     return (U, me.conn, np.arange(me.conn.shape[0], dtype=np.int64), me.dN, me.geo, me.wdet, me.h,
-            emat, params, s0, s0.copy(), np.zeros((me.conn.shape[0], 8, 3)),
+            emat, params, s0, s0.copy(), np.full(me.conn.shape[0], int(virgin), np.uint8),
+            np.zeros(me.conn.shape[0], np.uint8), np.zeros((me.conn.shape[0], 8, 3)),
             np.zeros(me.conn.shape[0]))
 
 
@@ -143,10 +145,12 @@ def steady(params):
         sim = build(length, height)
         ne, nc = sim.model.elements.shape[0], sim.cont.slave.shape[0]
         cases = []
-        for label, elastic, strain in (("hex elastic material", True, ELASTIC_STRAIN),
-                                       ("hex reference, elastic range", False, ELASTIC_STRAIN),
-                                       ("hex reference, plastic+damaged", False, PLASTIC_STRAIN)):
-            args = hex_args(sim, displacement(sim, strain, 0.0), elastic)
+        for label, elastic, strain, virgin in (
+                ("hex elastic material", True, ELASTIC_STRAIN, True),
+                ("hex reference, elastic range", False, ELASTIC_STRAIN, True),
+                ("hex reference, elastic range, full update", False, ELASTIC_STRAIN, False),
+                ("hex reference, plastic+damaged", False, PLASTIC_STRAIN, True)):
+            args = hex_args(sim, displacement(sim, strain, 0.0), elastic, virgin)
             hex_forces(*args)
             s_new = args[10]
             frac = float(np.mean((s_new[:, :, MS_DT] > 0) | (s_new[:, :, MS_DC] > 0))) if not elastic else 0.0

@@ -17,11 +17,12 @@ from . import loading as L
 from .kernels import relaxation as R
 from .kernels.assembly import node_row_map
 from .kernels.contact_forces import contact_rowsum
-from .kernels.hex8 import hex_geometry_shared, lumped_mass, stiffness_rowsum
+from .kernels.hex8 import hex_geometry_shared, lumped_mass, pristine_elements, stiffness_rowsum
 from .kernels.joint_law import JS_D, JS_DISS, JS_DISSF
-from .kernels.plastic_damage import MS_DC, MS_DISS, MS_DT
+from .kernels.plastic_damage import MP_HMAX, MS_DC, MS_DISS, MS_DT
 
-Mesh = namedtuple("Mesh", "conn active dN geo wdet h emat mparams s_old s_new fbuf energy ptr rows")
+Mesh = namedtuple("Mesh", "conn active dN geo wdet h emat mparams s_old s_new pristine dirty fbuf "
+                         "energy ptr rows")
 Cont = namedtuple("Cont", "slave master xi area law lparams gap0 s_old s_new gaps trac fbuf psi ptr rows")
 #: energies of an increment at its current state (:meth:`Simulation._energies`)
 Energies = namedtuple("Energies", "stored f_tot dw ratio diss")
@@ -331,8 +332,11 @@ class Simulation:
         s0 = np.stack([mt.initial_state() for mt in mats])[emat]
         s_old = np.ascontiguousarray(np.repeat(s0[:, None, :], 8, axis=1))
         ptr, rows = node_row_map(conn, n)
+        self._s_virgin = s0
         self.mesh = Mesh(conn, active, dN, geo, wdet, h, emat, mparams, s_old, s_old.copy(),
+                         np.zeros(conn.shape[0], np.uint8), np.zeros(conn.shape[0], np.uint8),
                          np.zeros((conn.shape[0], 8, 3)), np.zeros(conn.shape[0]), ptr, rows)
+        self._mark_pristine()
         self.mass = lumped_mass(conn, wdet, rho, n)  # physical, kg
         a = active
         self._rowsum_solid = stiffness_rowsum(conn[a], dN, geo[a], wdet[a], E[a], nu[a], n)
@@ -409,6 +413,13 @@ class Simulation:
         self._built = True
         if self._resuming:
             self._load_checkpoint()
+
+    def _mark_pristine(self):
+        """After the blocks' committed state changed (start, commit, checkpoint): the elements
+        still in their virgin state, and trial states equal to the committed ones."""
+        m = self.mesh
+        m.pristine[:] = pristine_elements(m.s_old, self._s_virgin, m.h, m.mparams[m.emat, MP_HMAX])
+        m.dirty[:] = 0
 
     def _rowsum(self):
         """Gershgorin row sums (n_nodes,) N/m of the elements and the current contact set."""
@@ -899,6 +910,7 @@ class Simulation:
         self._u_committed = d.U.copy()
         mesh.s_old[:] = mesh.s_new
         cont.s_old[:] = cont.s_new
+        self._mark_pristine()
         self.energy["E_damped"] += info[R.I_DAMPED]
         wd = mesh.wdet.sum(axis=1)
         vol = mesh.wdet
@@ -1069,6 +1081,7 @@ class Simulation:
         self._u_committed = d.U.copy()
         self.mesh.s_old[:] = arrays["s_blocks"]
         self.mesh.s_new[:] = arrays["s_blocks"]
+        self._mark_pristine()
         self.cont.s_old[:] = arrays["s_joints"]
         self.cont.s_new[:] = arrays["s_joints"]
         if self.sliding is not None:

@@ -20,7 +20,8 @@ Conventions
 import numpy as np
 
 from .config import ijit, jit, pjit, prange
-from .plastic_damage import MP_ELASTIC, MS_EPSP, elastic_stress, gp_update
+from .plastic_damage import (MP_ELASTIC, MS_EPSP, MS_SBC, MS_SBT, NMS, elastic_stress, gp_update,
+                             surely_elastic, trial_stress)
 
 CORNERS = np.array(
     [[-1, -1, -1], [1, -1, -1], [1, 1, -1], [-1, 1, -1],
@@ -256,8 +257,8 @@ def hex_add_gauss_force(F, sig, dng, w, fe):
 
 
 @pjit
-def hex_forces(U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old, s_new, f_elem,
-               energy):
+def hex_forces(U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old, s_new, pristine,
+               dirty, f_elem, energy):
     """Internal forces and stored elastic energy of the ``active`` elements (parallel, race-free).
 
     Parameters
@@ -279,6 +280,15 @@ def hex_forces(U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old, s_new
     s_old, s_new : (ne, 8, NMS) float64
         committed (read) and trial (written by ``gp_update``; not for elastic materials)
         Gauss-point states.
+    pristine : (ne,) uint8
+        1 where the committed state of every Gauss point is the material's virgin state
+        (:func:`pristine_elements`): while all its points stay surely elastic the element takes
+        the elastic path of its material without reading or writing the state (the trial state
+        is then the committed one; bit for bit the forces of ``gp_update``).
+    dirty : (ne,) uint8
+        read and written: 1 where ``s_new`` may differ from ``s_old`` (a pristine element that
+        went through ``gp_update``); such an element is reset to ``s_old`` when it is back in
+        its elastic range. Zero wherever ``s_new`` equals ``s_old`` (after a commit).
     f_elem : (ne, 8, 3) float64, N
         element internal forces, written.
     energy : (ne,) float64, J
@@ -288,12 +298,12 @@ def hex_forces(U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old, s_new
     na = active.shape[0]
     for c in prange((na + CHUNK - 1) // CHUNK):
         hex_chunk(c * CHUNK, min(na, (c + 1) * CHUNK), U, conn, active, dN, geo, wdet, h,
-                  elem_mat, params, s_old, s_new, f_elem, energy)
+                  elem_mat, params, s_old, s_new, pristine, dirty, f_elem, energy)
 
 
 @ijit
-def hex_chunk(lo, hi, U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old, s_new, f_elem,
-              energy):
+def hex_chunk(lo, hi, U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old, s_new, pristine,
+              dirty, f_elem, energy):
     """Elements ``active[lo:hi]`` of :func:`hex_forces` (one parallel task, its own scratch)."""
     ue = np.empty((8, 3))
     F = np.empty((3, 3))
@@ -309,6 +319,7 @@ def hex_chunk(lo, hi, U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old
                 fe[a, i] = 0.0
         p = params[elem_mat[e]]
         plastic = p[MP_ELASTIC] != 1.0
+        fast = plastic and pristine[e] != 0   # virgin state: no state to read while elastic
         dne = dN[geo[e]]
         en = 0.0
         for g in range(8):
@@ -316,18 +327,56 @@ def hex_chunk(lo, hi, U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old
             hex_gauss_strain(ue, dng, F, eps)
             w = wdet[e, g]
             acc = 0.0
-            if plastic:
+            if fast:
+                so = s_old[e, g]
+                i1, q, d0, d1, d2, d3, d4, d5 = trial_stress(p, eps[0], eps[1], eps[2], eps[3],
+                                                             eps[4], eps[5])
+                if surely_elastic(p, i1, q, so[MS_SBT], so[MS_SBC]):
+                    m0 = i1 / 3.0
+                    sig[0] = m0 + d0
+                    sig[1] = m0 + d1
+                    sig[2] = m0 + d2
+                    sig[3] = d3
+                    sig[4] = d4
+                    sig[5] = d5
+                else:   # the element leaves its virgin state: the full update from here on
+                    fast = False
+                    for gg in range(g):
+                        for m in range(NMS):
+                            s_new[e, gg, m] = s_old[e, gg, m]
+                    dirty[e] = 1
+            if not plastic:
+                elastic_stress(p, eps, sig)
+                for m in range(6):
+                    acc += sig[m] * eps[m]
+            elif fast:
+                for m in range(6):
+                    acc += sig[m] * eps[m]
+            else:
                 sn = s_new[e, g]
                 gp_update(p, h[e], eps, s_old[e, g], sn, sig)
                 for m in range(6):
                     acc += sig[m] * (eps[m] - sn[MS_EPSP + m])
-            else:
-                elastic_stress(p, eps, sig)
-                for m in range(6):
-                    acc += sig[m] * eps[m]
             hex_add_gauss_force(F, sig, dng, w, fe)
             en += 0.5 * w * acc
+        if fast and dirty[e] != 0:   # trial state = committed state again
+            for g in range(8):
+                for m in range(NMS):
+                    s_new[e, g, m] = s_old[e, g, m]
+            dirty[e] = 0
         energy[e] = en
+
+
+def pristine_elements(s_old, s_virgin, h, h_max):
+    """Elements whose committed Gauss-point states are all virgin: (ne,) uint8 for
+    ``hex_forces``.
+
+    ``s_old`` (ne, 8, NMS) committed states, ``s_virgin`` (ne, NMS) each element's material's
+    initial state, ``h`` (ne,) m element lengths and ``h_max`` (ne,) m their materials' largest
+    length (an element outside (0, h_max] is not pristine: its update flags the clamp).
+    """
+    virgin = np.all(s_old == s_virgin[:, None, :], axis=(1, 2))
+    return (virgin & (h > 0.0) & (h <= h_max)).astype(np.uint8)
 
 
 # ---------------------------------------------------------------------------- mass

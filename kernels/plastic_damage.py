@@ -179,6 +179,31 @@ def elastic_stress(p, eps, sig):
 
 
 @ijit
+def trial_stress(p, e0, e1, e2, e3, e4, e5):
+    """Trial effective stress of the elastic strain ``e0..e5`` (Voigt, engineering shears):
+    returns (I1 Pa, q = sqrt(3 J2) Pa, the deviator d0..d5 Pa, tensor shears)."""
+    mu = p[MP_MU]
+    tr = e0 + e1 + e2
+    i1tr = 3.0 * p[MP_K] * tr
+    d0 = 2.0 * mu * (e0 - tr / 3.0)
+    d1 = 2.0 * mu * (e1 - tr / 3.0)
+    d2 = 2.0 * mu * (e2 - tr / 3.0)
+    d3 = mu * e3
+    d4 = mu * e4
+    d5 = mu * e5
+    j2 = 0.5 * (d0 * d0 + d1 * d1 + d2 * d2) + d3 * d3 + d4 * d4 + d5 * d5
+    return i1tr, np.sqrt(3.0 * j2), d0, d1, d2, d3, d4, d5
+
+
+@ijit
+def surely_elastic(p, i1tr, qtr, sbt, sbc):
+    """The cheap elastic check: F(I1, q, I1/3 + 2q/3) <= tol at strengths ``sbt``, ``sbc`` (Pa)
+    proves the trial state elastic (the largest principal stress is at most I1/3 + 2q/3 and F
+    grows with it), without the eigenvalues."""
+    return yield_value(p, i1tr, qtr, i1tr / 3.0 + 2.0 * qtr / 3.0, sbt, sbc) <= p[MP_FTOL]
+
+
+@ijit
 def gp_update(p, h, eps, s_old, s_new, sig):
     """Stress update at one Gauss point.
 
@@ -200,7 +225,6 @@ def gp_update(p, h, eps, s_old, s_new, sig):
     if p[MP_ELASTIC] == 1.0:
         elastic_stress(p, eps, sig)
         return
-    mu = p[MP_MU]
     for i in range(NMS):
         s_new[i] = s_old[i]
     flag = int(s_old[MS_FLAG])
@@ -212,28 +236,17 @@ def gp_update(p, h, eps, s_old, s_new, sig):
         flag |= FLAG_LENGTH
         h = p[MP_HMAX]
     s = href / h
-    # trial effective stress
-    ee0 = eps[0] - s_old[MS_EPSP]
-    ee1 = eps[1] - s_old[MS_EPSP + 1]
-    ee2 = eps[2] - s_old[MS_EPSP + 2]
-    tr = ee0 + ee1 + ee2
-    i1tr = 3.0 * p[MP_K] * tr
+    mu = p[MP_MU]
+    i1tr, qtr, d0, d1, d2, d3, d4, d5 = trial_stress(
+        p, eps[0] - s_old[MS_EPSP], eps[1] - s_old[MS_EPSP + 1], eps[2] - s_old[MS_EPSP + 2],
+        eps[3] - s_old[MS_EPSP + 3], eps[4] - s_old[MS_EPSP + 4], eps[5] - s_old[MS_EPSP + 5])
     m = i1tr / 3.0
-    d0 = 2.0 * mu * (ee0 - tr / 3.0)
-    d1 = 2.0 * mu * (ee1 - tr / 3.0)
-    d2 = 2.0 * mu * (ee2 - tr / 3.0)
-    d3 = mu * (eps[3] - s_old[MS_EPSP + 3])
-    d4 = mu * (eps[4] - s_old[MS_EPSP + 4])
-    d5 = mu * (eps[5] - s_old[MS_EPSP + 5])
-    j2 = 0.5 * (d0 * d0 + d1 * d1 + d2 * d2) + d3 * d3 + d4 * d4 + d5 * d5
-    qtr = np.sqrt(3.0 * j2)
     sbt0 = s_old[MS_SBT]
     sbc0 = s_old[MS_SBC]
     dt0 = s_old[MS_DT]
     dc0 = s_old[MS_DC]
     ftol = p[MP_FTOL]
-    # cheap elastic check: sigma_max <= I1/3 + 2q/3 and F grows with sigma_max
-    if yield_value(p, i1tr, qtr, m + 2.0 * qtr / 3.0, sbt0, sbc0) <= ftol:
+    if surely_elastic(p, i1tr, qtr, sbt0, sbc0):
         if dt0 > 0.0:
             e1, e2, e3 = dev_eigenvalues(d0, d1, d2, d3, d4, d5)
             r = tension_weight(m + e1, m + e2, m + e3)

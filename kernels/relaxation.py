@@ -18,7 +18,8 @@ negative. FIRE measures velocities and forces in the metric of the fictitious ma
 never raises the kinetic energy; the reference points' DOFs take part with their masses.
 
 Arrays are grouped in three named tuples built by ``dr_masonry.solver``:
-``mesh``: hexahedra (conn, active, dN, geo, wdet, h, emat, mparams, s_old, s_new, fbuf, energy, ptr, rows);
+``mesh``: hexahedra (conn, active, dN, geo, wdet, h, emat, mparams, s_old, s_new, pristine, dirty, fbuf,
+energy, ptr, rows);
 ``cont``: contact points (slave, master, xi, area, law, lparams, gap0, s_old, s_new, gaps, trac,
 fbuf, psi, ptr, rows); ``dyn``: nodal and reference-point state (the ``Dyn`` named tuple in ``dr_masonry.solver``).
 """
@@ -151,7 +152,7 @@ def element_and_contact_forces(X, U, mesh, cont):
             hc = j - 1
             hex_chunk(hc * HEX_CHUNK, min(na, (hc + 1) * HEX_CHUNK), U, mesh.conn, mesh.active,
                       mesh.dN, mesh.geo, mesh.wdet, mesh.h, mesh.emat, mesh.mparams,
-                      mesh.s_old, mesh.s_new, mesh.fbuf, mesh.energy)
+                      mesh.s_old, mesh.s_new, mesh.pristine, mesh.dirty, mesh.fbuf, mesh.energy)
         else:
             c = t - j
             contact_chunk(c * CONTACT_CHUNK, min(nc, (c + 1) * CONTACT_CHUNK), X, U,

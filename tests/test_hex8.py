@@ -7,7 +7,7 @@ import scipy.sparse.linalg as spla
 import naive_hex8 as nv
 from dr_masonry.kernels import hex8
 from dr_masonry.kernels.assembly import gather_pair, node_row_map
-from dr_masonry.kernels.plastic_damage import NMS
+from dr_masonry.kernels.plastic_damage import MP_HMAX, NMS
 from dr_masonry.materials.plastic_damage import PlasticDamage
 from dr_masonry.model import HEX_NATURAL
 
@@ -41,6 +41,11 @@ def distorted_element(rng, amp=0.15):
     return 0.5 * (HEX_NATURAL + 1.0) * [1.0, 0.8, 1.2] + rng.uniform(-amp, amp, (8, 3))
 
 
+def _flags(ne):
+    """``pristine`` and ``dirty`` of ``hex_forces`` for the full state update everywhere."""
+    return np.zeros(ne, np.uint8), np.zeros(ne, np.uint8)
+
+
 def run_forces(U, X, conn, E, nu, elem_mat=None, params=None):
     """Element forces, energies and nodal forces of an elastic mesh."""
     ne = conn.shape[0]
@@ -53,7 +58,7 @@ def run_forces(U, X, conn, E, nu, elem_mat=None, params=None):
     f_elem = np.full((ne, 8, 3), np.nan)
     energy = np.full(ne, np.nan)
     hex8.hex_forces(np.ascontiguousarray(U, dtype=float), conn, np.arange(ne), dN, geo, wdet, h,
-                    elem_mat, params, s_old, s_new, f_elem, energy)
+                    elem_mat, params, s_old, s_new, *_flags(ne), f_elem, energy)
     f_node = np.zeros_like(X)
     np.add.at(f_node, conn.ravel(), f_elem.reshape(-1, 3))
     return f_elem, energy, f_node
@@ -174,11 +179,54 @@ def test_damaging_material_below_cracking_is_elastic():
     s_new = np.full_like(s_old, np.nan)
     f_elem, energy = np.empty((1, 8, 3)), np.empty(1)
     hex8.hex_forces(U, conn, np.array([0]), dN, geo, wdet, h, np.zeros(1, np.int64),
-                    mat.params_array()[None, :], s_old, s_new, f_elem, energy)
+                    mat.params_array()[None, :], s_old, s_new, *_flags(1), f_elem, energy)
     f_ref, en_ref, _, _ = nv.element_forces(X, U, 5e9, 0.15)
     assert np.abs(f_elem[0] - f_ref).max() <= 1e-10 * np.abs(f_ref).max()
     assert energy[0] == pytest.approx(en_ref, rel=1e-10)
     assert np.array_equal(s_new, s_old)
+
+
+def test_pristine_elements_skip_the_state_bit_for_bit():
+    """Virgin elements in their elastic range take the elastic path without the state (forces,
+    energies bit for bit those of the full update); one that yields goes through the full
+    update, is marked dirty and is reset to its committed state when it is elastic again."""
+    rng = np.random.default_rng(11)
+    X, conn = box_mesh((4, 2, 2), size=(0.4, 0.2, 0.2))
+    ne = conn.shape[0]
+    mat = PlasticDamage(E=5e9, nu=0.15, density=1800.0)
+    dN, geo, wdet, h = hex8.hex_geometry_shared(X, conn)
+    virgin = np.tile(mat.initial_state(), (ne, 1))
+    s_old = np.ascontiguousarray(np.repeat(virgin[:, None, :], 8, axis=1))
+    p = mat.params_array()
+    hmax = np.full(ne, p[MP_HMAX])
+    pristine = hex8.pristine_elements(s_old, virgin, h, hmax)
+    assert np.all(pristine == 1)
+    args = (conn, np.arange(ne), dN, geo, wdet, h, np.zeros(ne, np.int64), p[None, :], s_old)
+
+    def forces(U, s_new, pristine, dirty):
+        f, en = np.full((ne, 8, 3), np.nan), np.full(ne, np.nan)
+        hex8.hex_forces(U, *args, s_new, pristine, dirty, f, en)
+        return f, en
+
+    elastic = rng.uniform(-2e-7, 2e-7, X.shape)
+    # a strain growing along x: the elements at one end crack, the others stay elastic
+    cracking = elastic + np.column_stack([6e-4 * X[:, 0] ** 2, 0 * X[:, 0], 0 * X[:, 0]])
+    fast_new, dirty = s_old.copy(), np.zeros(ne, np.uint8)
+    for U in (elastic, cracking, elastic, cracking):
+        full_new = np.full_like(s_old, np.nan)
+        f_full, en_full = forces(U, full_new, *_flags(ne))
+        f_fast, en_fast = forces(U, fast_new, pristine, dirty)
+        assert np.array_equal(f_fast, f_full) and np.array_equal(en_fast, en_full)
+        assert np.array_equal(fast_new, full_new)       # the trial state, wherever it was kept
+        changed = np.any(full_new != s_old, axis=(1, 2))
+        assert np.array_equal(dirty.astype(bool), changed)
+    assert 0 < changed.sum() < ne
+    # an element whose committed state left the virgin one, or whose length is clamped
+    s_old[2, 5, 0] = 1e-3
+    h_out = h.copy()
+    h_out[3] = 2.0 * hmax[3]
+    flags = hex8.pristine_elements(s_old, virgin, h_out, hmax)
+    assert flags[2] == 0 and flags[3] == 0 and flags.sum() == ne - 2
 
 
 def test_inactive_elements_untouched():
@@ -193,7 +241,7 @@ def test_inactive_elements_untouched():
     s_old, s_new = np.zeros((ne, 8, NMS)), np.full((ne, 8, NMS), -7.0)
     active = np.array([4, 1], dtype=np.int64)
     hex8.hex_forces(rng.normal(0, 1e-3, X.shape), conn, active, dN, geo, wdet, h,
-                    np.zeros(ne, np.int64), params, s_old, s_new, f_elem, energy)
+                    np.zeros(ne, np.int64), params, s_old, s_new, *_flags(ne), f_elem, energy)
     idle = np.setdiff1d(np.arange(ne), active)
     assert np.all(f_elem[idle] == -7.0) and np.all(energy[idle] == -7.0)
     assert np.all(s_new[idle] == -7.0)
@@ -299,7 +347,8 @@ def test_shared_tables_match_per_element_tables():
     out = []
     for d, g, w, hh in ((dN, geo, wdet, h), (dNe, geoe, wde, he)):
         f, en, sn = np.full((ne, 8, 3), np.nan), np.full(ne, np.nan), np.full_like(s_old, -1.0)
-        hex8.hex_forces(U, conn, np.arange(ne), d, g, w, hh, elem_mat, params, s_old, sn, f, en)
+        hex8.hex_forces(U, conn, np.arange(ne), d, g, w, hh, elem_mat, params, s_old, sn,
+                        *_flags(ne), f, en)
         out.append((f, en, sn))
     (f, en, sn), (fe, ene, sne) = out
     assert np.abs(f - fe).max() <= 1e-12 * np.abs(fe).max()
