@@ -33,7 +33,7 @@ def node_row_map(items, n_nodes):
 
 
 @ijit
-def _rows_sum(buf, ptr, rows, i):
+def rows_sum(buf, ptr, rows, i):
     """Sum of the rows of ``buf`` (m, 3) that belong to node i (see :func:`node_row_map`)."""
     a0 = 0.0
     a1 = 0.0
@@ -51,8 +51,8 @@ def gather_pair(buf_a, ptr_a, rows_a, buf_b, ptr_b, rows_b, out):
     """``out[i] = (node i's rows of buf_a) + (its rows of buf_b)`` in one pass (two maps of
     :func:`node_row_map`, e.g. hexahedra and contact points); out (n, 3) overwritten."""
     for i in prange(out.shape[0]):
-        a0, a1, a2 = _rows_sum(buf_a, ptr_a, rows_a, i)
-        b0, b1, b2 = _rows_sum(buf_b, ptr_b, rows_b, i)
+        a0, a1, a2 = rows_sum(buf_a, ptr_a, rows_a, i)
+        b0, b1, b2 = rows_sum(buf_b, ptr_b, rows_b, i)
         out[i, 0] = a0 + b0
         out[i, 1] = a1 + b1
         out[i, 2] = a2 + b2

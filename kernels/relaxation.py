@@ -25,7 +25,7 @@ fbuf, psi, ptr, rows); ``dyn``: nodal and reference-point state (the ``Dyn`` nam
 """
 import numpy as np
 
-from .assembly import gather_pair
+from .assembly import gather_pair, rows_sum
 from .config import ijit, jit, pjit, prange
 from .contact_forces import CHUNK as CONTACT_CHUNK
 from .contact_forces import contact_chunk
@@ -53,6 +53,9 @@ ST_RUNAWAY = 3
 ST_UNSTABLE = 4  # viscous damping: the motion's Rayleigh quotient stays above the stable limit
 ST_STALLED = 5   # the residual ratio did not fall below STALL_DROP x its best in stall_iter iterations
 ST_SLOW = 6      # the decrease of the residual, extrapolated, does not reach tol within the budget
+
+#: nodes per parallel task of the node passes (:func:`gather_residual`, :func:`update_nodes`)
+NODE_CHUNK = 256
 
 #: ring damping (viscous scheme): each DOF counts the sign reversals of its velocity, the count
 #: multiplied by RING_MEMORY every iteration (a memory of about ten iterations); above RING_COUNT
@@ -162,6 +165,15 @@ def element_and_contact_forces(X, U, mesh, cont):
 
 
 @jit
+def stored_energy(mesh, cont):
+    """Stored energy of the last force evaluation (active hexahedra and contact points), J."""
+    e = 0.0
+    for q in range(mesh.active.shape[0]):
+        e += mesh.energy[mesh.active[q]]
+    return e + cont.psi.sum()
+
+
+@jit
 def internal_forces(mesh, cont, dyn):
     """Assemble internal forces into ``dyn.fint`` (n_nodes, 3), N; returns the stored energy, J.
 
@@ -170,19 +182,75 @@ def internal_forces(mesh, cont, dyn):
     element_and_contact_forces(dyn.X, dyn.U, mesh, cont)
     gather_pair(mesh.fbuf.reshape((-1, 3)), mesh.ptr, mesh.rows, cont.fbuf, cont.ptr, cont.rows,
                 dyn.fint)
-    e = 0.0
-    for q in range(mesh.active.shape[0]):
-        e += mesh.energy[mesh.active[q]]
-    return e + cont.psi.sum()
+    return stored_energy(mesh, cont)
+
+
+@ijit
+def node_residual(fext, P, fint, res, lam, i):
+    """Out-of-balance force ``res[i]`` = fext + lam P - fint of node i, N (arrays (n_nodes, 3))."""
+    for k in range(3):
+        res[i, k] = fext[i, k] + lam * P[i, k] - fint[i, k]
+
+
+@ijit
+def gather_chunk(lo, hi, hbuf, hptr, hrows, cbuf, cptr, crows, fext, P, fint, res, free, V, minv,
+                 fprev, lam, viscous, part):
+    """Nodes ``lo:hi`` of :func:`gather_residual` (one parallel task); their Rayleigh sums into
+    ``part`` (2,)."""
+    num = 0.0
+    den = 0.0
+    for i in range(lo, hi):
+        a0, a1, a2 = rows_sum(hbuf, hptr, hrows, i)
+        b0, b1, b2 = rows_sum(cbuf, cptr, crows, i)
+        fint[i, 0] = a0 + b0
+        fint[i, 1] = a1 + b1
+        fint[i, 2] = a2 + b2
+        node_residual(fext, P, fint, res, lam, i)
+        if viscous:
+            for k in range(3):
+                if free[i, k] > 0.0:   # (fprev is only read at free DOFs)
+                    du = V[i, k]
+                    num += du * (fint[i, k] - fprev[i, k])
+                    den += du * du / minv[i]
+                    fprev[i, k] = fint[i, k]
+    part[0] = num
+    part[1] = den
+
+
+@pjit
+def gather_residual(hbuf, mptr, mrows, cont, dyn, lam, fprev, viscous, parts):
+    """One parallel pass over the nodes after the force kernel: ``dyn.fint`` gathered from the
+    hexahedra's ``hbuf`` (ne * 8, 3) (node map ``mptr``, ``mrows``) and the contact points'
+    buffer, ``dyn.res`` at load factor ``lam``, and with ``viscous`` the Rayleigh quotient's sums
+    over the free DOFs, num = V . (fint - fprev) and den = V . M V, with ``fprev`` <- fint there.
+    ``parts`` (>= number of tasks, 4) scratch. Returns (num, den), summed task by task in a
+    fixed order (the same for any number of threads)."""
+    n = dyn.U.shape[0]
+    nt = (n + NODE_CHUNK - 1) // NODE_CHUNK
+    for t in prange(nt):
+        gather_chunk(t * NODE_CHUNK, min(n, (t + 1) * NODE_CHUNK), hbuf, mptr, mrows, cont.fbuf,
+                     cont.ptr, cont.rows, dyn.fext, dyn.P, dyn.fint, dyn.res, dyn.free, dyn.V,
+                     dyn.minv, fprev, lam, viscous, parts[t])
+    num = 0.0
+    den = 0.0
+    for t in range(nt):
+        num += parts[t, 0]
+        den += parts[t, 1]
+    return num, den
 
 
 @jit
 def residual(dyn, lam, rpres):
     """Out-of-balance forces ``dyn.res`` (n_nodes, 3) and generalised ones ``rpres`` (n_rp, 6)."""
-    n = dyn.U.shape[0]
-    for i in range(n):
-        for k in range(3):
-            dyn.res[i, k] = dyn.fext[i, k] + lam * dyn.P[i, k] - dyn.fint[i, k]
+    for i in range(dyn.U.shape[0]):
+        node_residual(dyn.fext, dyn.P, dyn.fint, dyn.res, lam, i)
+    rp_residual(dyn, lam, rpres)
+
+
+@jit
+def rp_residual(dyn, lam, rpres):
+    """Generalised out-of-balance forces ``rpres`` (n_rp, 6) of the reference points (N, N m):
+    their loads at factor ``lam`` plus the residuals ``dyn.res`` of their tied nodes."""
     for p in range(dyn.rpX.shape[0]):
         for k in range(6):
             rpres[p, k] = dyn.rpf[p, k] + lam * dyn.rpP[p, k]
@@ -226,13 +294,111 @@ def norms(dyn, lam, rpres):
 
 
 @ijit
-def move_dof(dyn, i, k, dt, umax, worst):
-    """``U[i, k] += dt V[i, k]``; returns the largest |U| so far and its node, (umax, worst), a
-    non-finite value taking the place of the largest."""
-    dyn.U[i, k] += dt * dyn.V[i, k]
-    a = abs(dyn.U[i, k])
-    if a > umax or not np.isfinite(a):
-        return a, i
+def update_chunk(lo, hi, fext, P, fint, res, free, V, U, minv, ring_count, lam, scheme, c_visc,
+                 alpha, ring, keep, c_mix, dt, part):
+    """Nodes ``lo:hi`` of :func:`update_nodes` (one parallel task); into ``part`` (4,): kinetic
+    energy, damped energy, largest finite |U| moved, non-finite U moved."""
+    ke = 0.0
+    damped = 0.0
+    umax = 0.0
+    n_bad = 0.0
+    for i in range(lo, hi):
+        node_residual(fext, P, fint, res, lam, i)
+        mi = 1.0 / minv[i]
+        for k in range(3):
+            if free[i, k] > 0.0:
+                r = res[i, k]
+                v = V[i, k]
+                if scheme == DAMP_LOCAL:
+                    sg = 1.0 if v > 0.0 else (-1.0 if v < 0.0 else 0.0)
+                    V[i, k] = v + minv[i] * (r - alpha * abs(r) * sg) / (1.0 + alpha)
+                    damped += alpha * abs(r) * 0.5 * abs(v + V[i, k])
+                elif scheme == DAMP_VISCOUS:
+                    c = c_visc
+                    if ring > 0.0 and ring_count[i, k] > RING_COUNT and ring > c:
+                        c = ring
+                    vn = ((2.0 - c) * v + 2.0 * minv[i] * r) / (2.0 + c)
+                    if ring > 0.0:   # the counts are only read with ring damping on
+                        ring_count[i, k] = (RING_MEMORY * ring_count[i, k]
+                                            + (1.0 if vn * v < 0.0 else 0.0))
+                    V[i, k] = vn
+                    damped += c * mi * (0.5 * (v + vn)) ** 2
+                elif scheme == DAMP_FIRE:
+                    V[i, k] = keep * v + (c_mix + dt) * minv[i] * r
+                else:
+                    V[i, k] += minv[i] * r
+                ke += 0.5 * mi * V[i, k] ** 2
+                if scheme != DAMP_KINETIC:
+                    U[i, k] += dt * V[i, k]
+                    a = abs(U[i, k])
+                    if not np.isfinite(a):
+                        n_bad += 1.0
+                    elif a > umax:
+                        umax = a
+    part[0] = ke
+    part[1] = damped
+    part[2] = umax
+    part[3] = n_bad
+
+
+@pjit
+def update_nodes(dyn, lam, scheme, c_visc, alpha, ring, keep, c_mix, dt, parts):
+    """One parallel pass over the nodes: ``dyn.res`` at load factor ``lam``, the velocity update
+    of the free DOFs by damping ``scheme`` (parameters as in :func:`relax`: ``c_visc`` the viscous
+    coefficient, ``keep``, ``c_mix`` and ``dt`` FIRE's mixing and step) and, except with kinetic
+    damping (which may step back first), their displacement update U += dt V. ``parts`` as in
+    :func:`gather_residual`.
+
+    Returns (kinetic energy J, energy removed by the damping in this pass J, largest finite |U|
+    moved m, number of non-finite U moved)."""
+    n = dyn.U.shape[0]
+    nt = (n + NODE_CHUNK - 1) // NODE_CHUNK
+    for t in prange(nt):
+        update_chunk(t * NODE_CHUNK, min(n, (t + 1) * NODE_CHUNK), dyn.fext, dyn.P, dyn.fint,
+                     dyn.res, dyn.free, dyn.V, dyn.U, dyn.minv, dyn.ring, lam, scheme, c_visc,
+                     alpha, ring, keep, c_mix, dt, parts[t])
+    ke = 0.0
+    damped = 0.0
+    umax = 0.0
+    n_bad = 0
+    for t in range(nt):
+        ke += parts[t, 0]
+        damped += parts[t, 1]
+        umax = max(umax, parts[t, 2])
+        n_bad += int(parts[t, 3])
+    return ke, damped, umax, n_bad
+
+
+@jit
+def displacement_extent(dyn):
+    """(largest finite |U| of the free DOFs m, number of non-finite ones)."""
+    umax = 0.0
+    n_bad = 0
+    for i in range(dyn.U.shape[0]):
+        for k in range(3):
+            if dyn.free[i, k] > 0.0:
+                a = abs(dyn.U[i, k])
+                if np.isfinite(a):
+                    umax = max(umax, a)
+                else:
+                    n_bad += 1
+    return umax, n_bad
+
+
+@jit
+def largest_displacement(dyn):
+    """(the free DOFs' first non-finite |U|, else their largest, m; its node) for a diagnosis."""
+    umax = -1.0
+    worst = 0
+    for i in range(dyn.U.shape[0]):
+        for k in range(3):
+            if dyn.free[i, k] > 0.0:
+                a = abs(dyn.U[i, k])
+                if not np.isfinite(a):
+                    return a, i
+                if a > umax:
+                    umax = a
+                    worst = i
     return umax, worst
 
 
@@ -339,19 +505,31 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, ring, tol, ref
     last_check = seg
     if seg == 0:
         dyn.ring[:] = 0.0
+    hbuf = mesh.fbuf.reshape((-1, 3))
+    parts = np.zeros(((n + NODE_CHUNK - 1) // NODE_CHUNK, 4))   # per-task sums of the node passes
     place_rigid_nodes(dyn)
     for it in range(1, max_iter + 1):
         its = seg + it   # iteration of the span
-        eint = internal_forces(mesh, cont, dyn)
-        residual(dyn, lam, rpres)
+        # forces, then one pass over the nodes: gathered forces, residual, the Rayleigh sums
+        element_and_contact_forces(dyn.X, dyn.U, mesh, cont)
+        num, den = gather_residual(hbuf, mesh.ptr, mesh.rows, cont, dyn, lam, fprev,
+                                   scheme == DAMP_VISCOUS, parts)
         # indirect displacement control: pattern magnitude follows the reaction of the held DOF
+        # (the node residuals at the new factor are recomputed where they are read next: below
+        # when the whole residual is needed before the update, else in ``update_nodes``)
         if ctrl[0] == 1:
             lam -= dyn.res[ctrl[1], ctrl[2]] / ctrl_pc
-            residual(dyn, lam, rpres)
         elif ctrl[0] == 2:
+            rp_residual(dyn, lam, rpres)
             lam -= rpres[ctrl[1], ctrl[2]] / ctrl_pc
-            residual(dyn, lam, rpres)
-        if its % check_every == 0 or its == 1:
+        check = its % check_every == 0 or its == 1
+        whole = check or scheme == DAMP_FIRE or scheme == DAMP_KINETIC
+        if whole:   # the whole residual at the new factor is read before the node update
+            if ctrl[0] != 0:
+                residual(dyn, lam, rpres)
+            else:
+                rp_residual(dyn, lam, rpres)
+        if check:
             rn, ref = norms(dyn, lam, rpres)
             if not (np.isfinite(rn) and np.isfinite(lam)):
                 status = ST_NONFINITE
@@ -399,15 +577,6 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, ring, tol, ref
         # ---- velocity update ----------------------------------------------------------
         c_visc = 0.0
         if scheme == DAMP_VISCOUS:
-            num = 0.0
-            den = 0.0
-            for i in range(n):
-                for k in range(3):
-                    if dyn.free[i, k] > 0.0:   # (fprev is only read at free DOFs)
-                        du = dyn.V[i, k]
-                        num += du * (dyn.fint[i, k] - fprev[i, k])
-                        den += du * du / dyn.minv[i]
-                        fprev[i, k] = dyn.fint[i, k]
             if den > 0.0 and num > 0.0 and its > 1:
                 c_visc = alpha * 2.0 * np.sqrt(num / den)
             if c_visc > 1.9:
@@ -477,37 +646,11 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, ring, tol, ref
                     # |v_mixed|_M^2 = keep^2 vmv + 2 keep c_mix pw + c_mix^2 fmf <= vmv
                     damped += 0.5 * (vmv - keep * keep * vmv - 2.0 * keep * c_mix * pw
                                      - c_mix * c_mix * fmf)
-        ke = 0.0
-        # the displacement update of the node DOFs is fused into this loop (one pass over the
-        # nodes), except with kinetic damping, which may go back to the energy peak first
-        umax = 0.0
-        for i in range(n):
-            mi = 1.0 / dyn.minv[i]
-            for k in range(3):
-                if dyn.free[i, k] > 0.0:
-                    r = dyn.res[i, k]
-                    v = dyn.V[i, k]
-                    if scheme == DAMP_LOCAL:
-                        sg = 1.0 if v > 0.0 else (-1.0 if v < 0.0 else 0.0)
-                        dyn.V[i, k] = v + dyn.minv[i] * (r - alpha * abs(r) * sg) / (1.0 + alpha)
-                        damped += alpha * abs(r) * 0.5 * abs(v + dyn.V[i, k])
-                    elif scheme == DAMP_VISCOUS:
-                        c = c_visc
-                        if ring > 0.0 and dyn.ring[i, k] > RING_COUNT and ring > c:
-                            c = ring
-                        vn = ((2.0 - c) * v + 2.0 * dyn.minv[i] * r) / (2.0 + c)
-                        if ring > 0.0:   # the counts are only read with ring damping on
-                            dyn.ring[i, k] = (RING_MEMORY * dyn.ring[i, k]
-                                              + (1.0 if vn * v < 0.0 else 0.0))
-                        dyn.V[i, k] = vn
-                        damped += c * mi * (0.5 * (v + vn)) ** 2
-                    elif scheme == DAMP_FIRE:
-                        dyn.V[i, k] = keep * v + (c_mix + dt) * dyn.minv[i] * r
-                    else:
-                        dyn.V[i, k] += dyn.minv[i] * r
-                    ke += 0.5 * mi * dyn.V[i, k] ** 2
-                    if scheme != DAMP_KINETIC:
-                        umax, worst = move_dof(dyn, i, k, dt, umax, worst)
+        ke, dmp, umax, n_bad = update_nodes(dyn, lam, scheme, c_visc, alpha, ring, keep, c_mix, dt,
+                                            parts)
+        damped += dmp
+        if not whole:   # (the reference points have not moved since the gather)
+            rp_residual(dyn, lam, rpres)
         for p in range(nr):
             for k in range(6):
                 if dyn.rpfree[p, k] > 0.0:
@@ -545,20 +688,19 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, ring, tol, ref
             for i in range(n):
                 for k in range(3):
                     if dyn.free[i, k] > 0.0:
-                        umax, worst = move_dof(dyn, i, k, dt, umax, worst)
+                        dyn.U[i, k] += dt * dyn.V[i, k]
+            umax, n_bad = displacement_extent(dyn)
         for p in range(nr):
             for k in range(6):
                 if dyn.rpfree[p, k] > 0.0:
                     dyn.rpU[p, k] += dt * dyn.rpV[p, k]
         place_rigid_nodes(dyn)
-        if not np.isfinite(umax):
-            status = ST_NONFINITE
-            qty = umax
+        if n_bad > 0 or umax > u_limit:
+            qty, worst = largest_displacement(dyn)
+            status = ST_NONFINITE if n_bad > 0 else ST_RUNAWAY
             break
-        if umax > u_limit:
-            status = ST_RUNAWAY
-            qty = umax
-            break
+    if it > 0:
+        eint = stored_energy(mesh, cont)
     lam_arr[0] = lam
     info[I_ITERS] = it
     info[I_STATUS] = status
