@@ -370,22 +370,6 @@ def update_nodes(dyn, lam, scheme, c_visc, alpha, ring, keep, c_mix, dt, parts):
 
 
 @jit
-def displacement_extent(dyn):
-    """(largest finite |U| of the free DOFs m, number of non-finite ones)."""
-    umax = 0.0
-    n_bad = 0
-    for i in range(dyn.U.shape[0]):
-        for k in range(3):
-            if dyn.free[i, k] > 0.0:
-                a = abs(dyn.U[i, k])
-                if np.isfinite(a):
-                    umax = max(umax, a)
-                else:
-                    n_bad += 1
-    return umax, n_bad
-
-
-@jit
 def largest_displacement(dyn):
     """(the free DOFs' first non-finite |U|, else their largest, m; its node) for a diagnosis."""
     umax = -1.0
@@ -689,7 +673,8 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, ring, tol, ref
                 for k in range(3):
                     if dyn.free[i, k] > 0.0:
                         dyn.U[i, k] += dt * dyn.V[i, k]
-            umax, n_bad = displacement_extent(dyn)
+            umax = largest_displacement(dyn)[0]
+            n_bad = 0 if np.isfinite(umax) else 1
         for p in range(nr):
             for k in range(6):
                 if dyn.rpfree[p, k] > 0.0:
