@@ -9,8 +9,10 @@ from __future__ import annotations
 import time
 import warnings
 from collections import namedtuple
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass
 
+import numba
 import numpy as np
 
 from . import loading as L
@@ -46,12 +48,29 @@ COARSE_MIN_BLOCKS = 30
 #: Python regains control at least this often (progress bar, Ctrl-C: seconds, not the tens of
 #: minutes one long increment of S6 or S7 runs)
 CALL_ITERATIONS = 2000
+#: models with fewer nodes relax on one thread: below it the second thread's wake-ups in the three
+#: parallel regions of an iteration cost more than it computes (BENCHMARKS.md section 36); a run
+#: is the same on any thread count, so this changes the run time only
+SERIAL_NODES = 500
 #: warn (once per run) when a joint node has slid off its master block's face by more than this
 #: fraction of the face's shortest edge: contact points are paired in the reference configuration
 OVERHANG_WARN = 0.05
 #: load-step control: a half step that dissipates this fraction of its whole step's dissipation
 #: or more holds a jump (smooth softening gives about one half) and is not cut again
 JUMP = 0.75
+
+
+@contextmanager
+def _threads_for(n_nodes):
+    """Numba threads for relaxing a model of ``n_nodes`` nodes: one below ``SERIAL_NODES``, else
+    as set; restored afterwards."""
+    threads = numba.get_num_threads()
+    if n_nodes < SERIAL_NODES:
+        numba.set_num_threads(1)
+    try:
+        yield
+    finally:
+        numba.set_num_threads(threads)
 
 
 def _reaction_rows(pairs, blocks, support):
@@ -728,7 +747,8 @@ class Simulation:
         tol = stage.tol or o.tol
         stall = o.stall_iter if depth < o.max_cuts else 0
         t0 = time.perf_counter()
-        self._relax(ctrl, pc, tol, max_iter, stall, info)
+        with _threads_for(self.dyn.U.shape[0]):
+            self._relax(ctrl, pc, tol, max_iter, stall, info)
         elapsed = time.perf_counter() - t0
         status = int(info[R.I_STATUS])
         if status in (R.ST_NONFINITE, R.ST_RUNAWAY):

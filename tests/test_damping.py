@@ -286,6 +286,22 @@ def test_relaxation_does_not_depend_on_the_thread_count(scheme):
     np.testing.assert_array_equal(i1, i2)
 
 
+def test_small_models_relax_on_one_thread():
+    """Below ``SERIAL_NODES`` the solver relaxes on one thread and gives the threads back after
+    (also when the relaxation raises); larger models keep the threads as set."""
+    from dr_masonry import solver
+    before = numba.get_num_threads()
+    with solver._threads_for(solver.SERIAL_NODES - 1):
+        assert numba.get_num_threads() == 1
+    assert numba.get_num_threads() == before
+    with pytest.raises(KeyboardInterrupt):
+        with solver._threads_for(10):
+            raise KeyboardInterrupt
+    assert numba.get_num_threads() == before
+    with solver._threads_for(solver.SERIAL_NODES):
+        assert numba.get_num_threads() == before
+
+
 def test_solver_splits_long_spans_without_changing_the_answer(monkeypatch):
     """``Simulation._relax`` with compiled calls of 40 iterations instead of 2,000: the same
     increments, iterations and displacements (plain and two-level relaxation)."""
