@@ -294,8 +294,8 @@ def norms(dyn, lam, rpres):
 
 
 @ijit
-def update_chunk(lo, hi, fext, P, fint, res, free, V, U, minv, ring_count, lam, scheme, c_visc,
-                 alpha, ring, keep, c_mix, dt, part):
+def update_chunk(lo, hi, fext, P, fint, res, free, V, U, minv, ring_count, lam, stale, scheme,
+                 c_visc, alpha, ring, keep, c_mix, dt, part):
     """Nodes ``lo:hi`` of :func:`update_nodes` (one parallel task); into ``part`` (4,): kinetic
     energy, damped energy, largest finite |U| moved, non-finite U moved."""
     ke = 0.0
@@ -303,7 +303,8 @@ def update_chunk(lo, hi, fext, P, fint, res, free, V, U, minv, ring_count, lam, 
     umax = 0.0
     n_bad = 0.0
     for i in range(lo, hi):
-        node_residual(fext, P, fint, res, lam, i)
+        if stale:
+            node_residual(fext, P, fint, res, lam, i)
         mi = 1.0 / minv[i]
         for k in range(3):
             if free[i, k] > 0.0:
@@ -342,8 +343,9 @@ def update_chunk(lo, hi, fext, P, fint, res, free, V, U, minv, ring_count, lam, 
 
 
 @pjit
-def update_nodes(dyn, lam, scheme, c_visc, alpha, ring, keep, c_mix, dt, parts):
-    """One parallel pass over the nodes: ``dyn.res`` at load factor ``lam``, the velocity update
+def update_nodes(dyn, lam, stale, scheme, c_visc, alpha, ring, keep, c_mix, dt, parts):
+    """One parallel pass over the nodes: with ``stale`` (the load factor changed since the
+    residual was formed) ``dyn.res`` at load factor ``lam`` first, then the velocity update
     of the free DOFs by damping ``scheme`` (parameters as in :func:`relax`: ``c_visc`` the viscous
     coefficient, ``keep``, ``c_mix`` and ``dt`` FIRE's mixing and step) and, except with kinetic
     damping (which may step back first), their displacement update U += dt V. ``parts`` as in
@@ -355,8 +357,8 @@ def update_nodes(dyn, lam, scheme, c_visc, alpha, ring, keep, c_mix, dt, parts):
     nt = (n + NODE_CHUNK - 1) // NODE_CHUNK
     for t in prange(nt):
         update_chunk(t * NODE_CHUNK, min(n, (t + 1) * NODE_CHUNK), dyn.fext, dyn.P, dyn.fint,
-                     dyn.res, dyn.free, dyn.V, dyn.U, dyn.minv, dyn.ring, lam, scheme, c_visc,
-                     alpha, ring, keep, c_mix, dt, parts[t])
+                     dyn.res, dyn.free, dyn.V, dyn.U, dyn.minv, dyn.ring, lam, stale, scheme,
+                     c_visc, alpha, ring, keep, c_mix, dt, parts[t])
     ke = 0.0
     damped = 0.0
     umax = 0.0
@@ -499,8 +501,8 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, ring, tol, ref
         num, den = gather_residual(hbuf, mesh.ptr, mesh.rows, cont, dyn, lam, fprev,
                                    scheme == DAMP_VISCOUS, parts)
         # indirect displacement control: pattern magnitude follows the reaction of the held DOF
-        # (the node residuals at the new factor are recomputed where they are read next: below
-        # when the whole residual is needed before the update, else in ``update_nodes``)
+        # (the node residuals at the new factor are formed where they are read next: below when
+        # the whole residual is needed before the update, else in ``update_nodes``)
         if ctrl[0] == 1:
             lam -= dyn.res[ctrl[1], ctrl[2]] / ctrl_pc
         elif ctrl[0] == 2:
@@ -630,8 +632,8 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, ring, tol, ref
                     # |v_mixed|_M^2 = keep^2 vmv + 2 keep c_mix pw + c_mix^2 fmf <= vmv
                     damped += 0.5 * (vmv - keep * keep * vmv - 2.0 * keep * c_mix * pw
                                      - c_mix * c_mix * fmf)
-        ke, dmp, umax, n_bad = update_nodes(dyn, lam, scheme, c_visc, alpha, ring, keep, c_mix, dt,
-                                            parts)
+        ke, dmp, umax, n_bad = update_nodes(dyn, lam, ctrl[0] != 0 and not whole, scheme, c_visc,
+                                            alpha, ring, keep, c_mix, dt, parts)
         damped += dmp
         if not whole:   # (the reference points have not moved since the gather)
             rp_residual(dyn, lam, rpres)
