@@ -5,7 +5,8 @@ state with damaged joints, then times ``relax`` for ``iters`` iterations with to
 batches; best and median per iteration) and its parallel pieces: ``element_and_contact_forces``
 (hexahedra and contact points, one region), ``gather_pair`` (node forces, one region) and
 ``internal_forces`` (both, plus the energy sums); ``rest`` = iteration - internal forces (the
-serial residual, damping and update); ``forces_full_update``: the forces again with every element
+residual, damping and update passes over the nodes and the serial remainder, BENCHMARKS.md
+section 35); ``forces_full_update``: the forces again with every element
 through the full Gauss-point state update (the pristine elements' skip switched off). Every (threads, policy) setting runs in a process of its
 own, since OpenMP reads ``OMP_WAIT_POLICY`` when it starts. BENCHMARKS.md section 16.
 
