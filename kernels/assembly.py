@@ -46,13 +46,19 @@ def rows_sum(buf, ptr, rows, i):
     return a0, a1, a2
 
 
+@ijit
+def gather_node(buf_a, ptr_a, rows_a, buf_b, ptr_b, rows_b, out, i):
+    """``out[i]`` = node i's rows of ``buf_a`` plus its rows of ``buf_b``."""
+    a0, a1, a2 = rows_sum(buf_a, ptr_a, rows_a, i)
+    b0, b1, b2 = rows_sum(buf_b, ptr_b, rows_b, i)
+    out[i, 0] = a0 + b0
+    out[i, 1] = a1 + b1
+    out[i, 2] = a2 + b2
+
+
 @pjit
 def gather_pair(buf_a, ptr_a, rows_a, buf_b, ptr_b, rows_b, out):
     """``out[i] = (node i's rows of buf_a) + (its rows of buf_b)`` in one pass (two maps of
     :func:`node_row_map`, e.g. hexahedra and contact points); out (n, 3) overwritten."""
     for i in prange(out.shape[0]):
-        a0, a1, a2 = rows_sum(buf_a, ptr_a, rows_a, i)
-        b0, b1, b2 = rows_sum(buf_b, ptr_b, rows_b, i)
-        out[i, 0] = a0 + b0
-        out[i, 1] = a1 + b1
-        out[i, 2] = a2 + b2
+        gather_node(buf_a, ptr_a, rows_a, buf_b, ptr_b, rows_b, out, i)

@@ -347,16 +347,14 @@ def hex_chunk(lo, hi, U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old
                     dirty[e] = 1
             if not plastic:
                 elastic_stress(p, eps, sig)
-                for m in range(6):
-                    acc += sig[m] * eps[m]
-            elif fast:
-                for m in range(6):
-                    acc += sig[m] * eps[m]
-            else:
+            if plastic and not fast:
                 sn = s_new[e, g]
                 gp_update(p, h[e], eps, s_old[e, g], sn, sig)
                 for m in range(6):
                     acc += sig[m] * (eps[m] - sn[MS_EPSP + m])
+            else:   # elastic stress from the total strain (no plastic strain)
+                for m in range(6):
+                    acc += sig[m] * eps[m]
             hex_add_gauss_force(F, sig, dng, w, fe)
             en += 0.5 * w * acc
         if fast and dirty[e] != 0:   # trial state = committed state again

@@ -25,7 +25,7 @@ fbuf, psi, ptr, rows); ``dyn``: nodal and reference-point state (the ``Dyn`` nam
 """
 import numpy as np
 
-from .assembly import gather_pair, rows_sum
+from .assembly import gather_node, gather_pair
 from .config import ijit, jit, pjit, prange
 from .contact_forces import CHUNK as CONTACT_CHUNK
 from .contact_forces import contact_chunk
@@ -200,11 +200,7 @@ def gather_chunk(lo, hi, hbuf, hptr, hrows, cbuf, cptr, crows, fext, P, fint, re
     num = 0.0
     den = 0.0
     for i in range(lo, hi):
-        a0, a1, a2 = rows_sum(hbuf, hptr, hrows, i)
-        b0, b1, b2 = rows_sum(cbuf, cptr, crows, i)
-        fint[i, 0] = a0 + b0
-        fint[i, 1] = a1 + b1
-        fint[i, 2] = a2 + b2
+        gather_node(hbuf, hptr, hrows, cbuf, cptr, crows, fint, i)
         node_residual(fext, P, fint, res, lam, i)
         if viscous:
             for k in range(3):
