@@ -89,7 +89,13 @@ def _cmd_info(args):
     print(f"model:     {r.summary()}")
     print("groups:    " + ", ".join(f"{k} ({len(v)})" for k, v in r.groups.items()))
     print(f"config:    {json.dumps(r.config, indent=2, sort_keys=True)}")
+    for k, rs in enumerate(r.attrs["restarts"], 1):
+        changed = _changed(r.config, rs.get("config", {}))
+        print(f"restart {k}: {rs.get('time', '?')}, dr_masonry {rs.get('code_version', '?')}: "
+              + (", ".join(f"{key} {old!r} -> {new!r}" for key, (old, new) in changed.items())
+                 or "same parameters"))
     print(f"history:   {r.n_history} rows, columns {list(r.history)}")
+    print(_above_tol(r.config, r.history))
     ids = r.frame_ids
     print(f"frames:    {r.n_frames}" + (f" (increments {ids[0]} .. {ids[-1]})" if ids else ""))
     try:
@@ -109,6 +115,41 @@ def _cmd_info(args):
             i, j = int(np.argmax(v)), int(np.argmin(v))
             print(f"peak {k}: max {v[i]:.6g} (row {i}), min {v[j]:.6g} (row {j})")
     return 0
+
+
+def _flat(d, prefix=""):
+    """A nested configuration dict as {"a.b": value}."""
+    out = {}
+    for k, v in d.items():
+        if isinstance(v, dict):
+            out.update(_flat(v, f"{prefix}{k}."))
+        else:
+            out[f"{prefix}{k}"] = v
+    return out
+
+
+def _changed(config, later):
+    """{key: (value at creation, value at a restart)} for the keys a restart's configuration sets
+    to another value (``resume`` left out; ``solver.X`` left out where ``X`` says the same)."""
+    a, b = _flat(config), _flat(later)
+    diff = {k: (a.get(k), v) for k, v in b.items() if k != "resume" and a.get(k) != v}
+    return {k: v for k, v in diff.items()
+            if not (k.startswith("solver.") and diff.get(k[7:], (None, object()))[1] == v[1])}
+
+
+def _above_tol(config, history):
+    """One line: the rows whose residual ratio is above the run's ``tol`` (accepted at a floor,
+    ``SolverOptions.floor_tol``), or that there are none."""
+    tol = (config.get("solver") or {}).get("tol", config.get("tol"))
+    res = history.get("residual")
+    if tol is None or res is None or not len(res):
+        return "residual:  (no solver tolerance or residual column recorded)"
+    rows = np.flatnonzero(np.asarray(res) > tol * (1.0 + 1e-9))
+    if not rows.size:
+        return f"residual:  every row converged to tol {tol:g}"
+    shown = ", ".join(str(i) for i in rows[:12]) + (", ..." if rows.size > 12 else "")
+    return (f"residual:  {rows.size} of {len(res)} rows accepted above tol {tol:g} (floor_tol; "
+            f"largest ratio {np.max(res):.3g}): rows {shown}")
 
 
 def _cmd_list(args):

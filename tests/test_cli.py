@@ -127,6 +127,34 @@ def test_info_checkpoint_after_the_last_frame(tmp_path, capsys):
     assert fields["U"].shape == (24, 3)
 
 
+def test_info_restarts_and_rows_above_tol(tmp_path, capsys):
+    """info says what each restart changed and which rows were accepted above tol (floor_tol)."""
+    from test_results import tiny_model
+    from dr_masonry.results import ResultWriter
+    p = tmp_path / "r.h5"
+    cfg = {"max_iter": 200, "floor_tol": 0.0, "solver": {"tol": 1e-4, "max_iter": 200}}
+    with ResultWriter(p, tiny_model(), cfg) as w:
+        for i, res in enumerate([9e-5, 1e-4, 3e-4]):
+            w.append_history({"increment": i, "residual": res})
+    assert main(["info", str(p)]) == 0
+    out = capsys.readouterr().out
+    assert "residual:  1 of 3 rows accepted above tol 0.0001 (floor_tol; largest ratio 0.0003): " \
+           "rows 2" in out
+    assert "\nrestart " not in out
+    later = {"max_iter": 50, "floor_tol": 1e-3, "resume": True,
+             "solver": {"tol": 1e-4, "max_iter": 50, "floor_tol": 1e-3}}
+    with ResultWriter(p, None, later, mode="a") as w:
+        w.append_history({"increment": 3, "residual": 1e-4})
+    with ResultWriter(p, None, {}, mode="a"):
+        pass
+    assert main(["info", str(p)]) == 0
+    lines = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("restart")]
+    assert len(lines) == 2
+    # solver.max_iter and solver.floor_tol say what max_iter and floor_tol say
+    assert lines[0].endswith(": max_iter 200 -> 50, floor_tol 0.0 -> 0.001")
+    assert lines[1].endswith(": same parameters")
+
+
 def test_vtk_command(tmp_path, capsys):
     p = tmp_path / "r.h5"
     write_fake_result(p)
