@@ -12,7 +12,9 @@ along, thickness, height) built by ``dr_masonry.geometry.add_wall``:
 * on each thread count of ``threads`` and each wall size of ``sizes``;
 * first-call compile time in a fresh subprocess with an empty ``NUMBA_CACHE_DIR``, then the cached
   warm start in a second subprocess on the same cache (``compile=0`` skips both, ``steady=0``
-  runs only them).
+  runs only them); for the cold start, the compile time of each function of a run's kernels
+  (Numba's ``numba:compile`` events, exclusive of the functions it compiles in turn: the
+  largest ``compile_top``), which says where a cold start goes.
 
 Timings are best and median of ``repeats`` batches of at least ``min_time`` s each; the machine is
 shared, so compare ratios within one run. Run: ``python benchmarks/kernels.py [key=value ...]``;
@@ -38,6 +40,7 @@ PARAMS = dict(
     steady=True,                # steady-state timings (steady=0: only the compile/cache starts)
     compile=True,
     mode="all",                 # "all" or "firstcall" (used by the compile subprocesses)
+    compile_top=8,              # functions listed in the cold start's compile split
 )
 ELASTIC_STRAIN = 2e-5           # uniaxial strain well inside the elastic range (0.1 MPa)
 PLASTIC_STRAIN = 1e-3           # uniaxial tension, trial stress 4.8 MPa >> ft = 1.5 MPa
@@ -195,27 +198,47 @@ def firstcall():
     included), so build + relax is what a run's cold start compiles
     (``production_total_s``); ``hex_forces`` and ``contact_forces`` alone, compiled after it,
     serve the tests and these benchmarks only."""
+    from numba.core import event
     from dr_masonry.kernels.contact_forces import contact_forces
     from dr_masonry.kernels.hex8 import hex_forces
     from dr_masonry.kernels.relaxation import relax
     t = {}
     t0 = t1 = time.perf_counter()
-    sim = build(0.44, 0.243)
-    t["build_s (geometry kernels + set-up)"] = time.perf_counter() - t1
-    for name, fn, args in (("relax_s", relax, gravity(sim)),
-                           ("hex_forces_s", hex_forces, hex_args(sim, displacement(sim, 1e-5, 0), False)),
+    with event.install_recorder("numba:compile") as rec:
+        sim = build(0.44, 0.243)
+        t["build_s (geometry kernels + set-up)"] = time.perf_counter() - t1
+        t1 = time.perf_counter()
+        relax(*gravity(sim))
+        t["relax_s"] = time.perf_counter() - t1
+    t["production_total_s"] = time.perf_counter() - t0
+    for name, fn, args in (("hex_forces_s", hex_forces, hex_args(sim, displacement(sim, 1e-5, 0), False)),
                            ("contact_forces_s", contact_forces, contact_args(sim, displacement(sim, 0, 1e-7)))):
         t1 = time.perf_counter()
         fn(*args)
         t[name] = time.perf_counter() - t1
-        if name == "relax_s":
-            t["production_total_s"] = time.perf_counter() - t0
     t["first_calls_total_s"] = time.perf_counter() - t0
+    t["compile_split"] = compile_split(rec.buffer)
     print(json.dumps(t))
 
 
-def compile_times():
-    rows = []
+def compile_split(events):
+    """{function: seconds} compiling each function, exclusive of the functions compiled inside
+    it, from Numba's ``numba:compile`` start/end events (name -> s, largest first)."""
+    stack, own = [], {}
+    for ts, ev in events:
+        name = ev.data["dispatcher"].py_func.__qualname__
+        if ev.is_start:
+            stack.append([name, ts, 0.0])
+            continue
+        name, start, inner = stack.pop()
+        own[name] = own.get(name, 0.0) + (ts - start) - inner
+        if stack:
+            stack[-1][2] += ts - start
+    return dict(sorted(own.items(), key=lambda kv: -kv[1]))
+
+
+def compile_times(top_n):
+    rows, cold_split = [], []
     with tempfile.TemporaryDirectory() as cache:
         env = dict(os.environ, NUMBA_CACHE_DIR=cache)
         for label in ("cold (empty cache)", "warm (cached)"):
@@ -224,10 +247,16 @@ def compile_times():
                                  capture_output=True, text=True, check=True).stdout
             wall = time.perf_counter() - t0
             res = json.loads(out.strip().splitlines()[-1])
+            split = res.pop("compile_split")
             rows.append(dict(start=label, process_wall_s=wall, **res,
                              interpreter_and_imports_s=wall - res["first_calls_total_s"]))
             print(f"  {label}: {wall:.1f} s", flush=True)
+            if label.startswith("cold"):
+                top = list(split.items())[:top_n]
+                cold_split = [dict(function=k, compile_s=v) for k, v in top]
     report(rows, "kernels_firstcall", "First call: compile vs cached start (fresh processes)")
+    report(cold_split, "kernels_compile_split",
+           f"Cold start of a run's kernels: compile time per function, exclusive (largest {top_n})")
 
 
 def main(argv=None):
@@ -243,7 +272,7 @@ def main(argv=None):
         print(f"numba threading layer used: {numba.threading_layer()}, "
               f"OMP_WAIT_POLICY={os.environ.get('OMP_WAIT_POLICY')}")
     if params["compile"]:
-        compile_times()
+        compile_times(params["compile_top"])
 
 
 if __name__ == "__main__":

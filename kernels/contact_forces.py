@@ -6,7 +6,7 @@ as internal force +F on the slave node and -N_a F on master node a. Residual = e
 """
 import numpy as np
 
-from .config import ijit, pjit, prange
+from .config import ijit, jit, pjit, prange
 from .contact_frame import contact_frame, quad_tangents
 from .joint_law import JS_D, JS_DP1, JS_DP2, P_KC, P_KNN, P_KSS, joint_point
 
@@ -45,7 +45,9 @@ def _dnormal(jac, n0, n1, n2, v0, v1, v2):
     return (v0 - n0 * nv) / jac, (v1 - n1 * nv) / jac, (v2 - n2 * nv) / jac
 
 
-@ijit
+# a call, not inlined: only the few points off their master face take it (BENCHMARKS.md
+# section 37)
+@jit
 def offset_forces(xq, r, s, d, frame, jac, t, ar, fbuf, row):
     """Add to the master rows ``fbuf[row:row + 4]`` the forces of the frame's turning,
     ``ar * sum_k t_k d(frame_k . d) / d x_a`` (N), for the separation ``d`` (3,) = x_slave -

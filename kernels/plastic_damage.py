@@ -203,7 +203,9 @@ def surely_elastic(p, i1tr, qtr, sbt, sbc):
     return yield_value(p, i1tr, qtr, i1tr / 3.0 + 2.0 * qtr / 3.0, sbt, sbc) <= p[MP_FTOL]
 
 
-@ijit
+# a call, not inlined: the return mapping doubled the fused force kernel's compile time, and
+# its cost per plastic point dwarfs a call (BENCHMARKS.md section 37)
+@jit
 def gp_update(p, h, eps, s_old, s_new, sig):
     """Stress update at one Gauss point.
 
