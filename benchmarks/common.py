@@ -69,6 +69,27 @@ def child_row(script, overrides, env=None):
     return json.loads(res.stdout.strip().splitlines()[-1])
 
 
+def stored_run(scene, path, name):
+    """(simulation, stages, module) of scene ``scene`` set up from a copy of its result file
+    ``path`` (``out/<name>.h5``) with the parameters stored in it and its checkpoint loaded
+    (``Simulation.resume``): running it continues the stored run without touching the original.
+    A ParameterError names a missing file."""
+    import shutil
+    from dr_masonry.cli import import_case
+    from dr_masonry.params import ParameterError
+    from dr_masonry.results import open_result
+    if not os.path.isfile(path):
+        raise ParameterError(f"parameter file={path!r}: no such result file")
+    mod = import_case(scene)
+    os.makedirs(OUT, exist_ok=True)
+    copy = os.path.join(OUT, f"{name}.h5")
+    shutil.copy(path, copy)
+    stored = open_result(copy).config
+    run = {**mod.PARAMS, **stored, "h5": copy, "progress": False}  # keys newer than the file: defaults
+    sim, stages = mod.build(run)
+    return sim, stages, copy
+
+
 def start(defaults, doc, argv, child_mode=None, child=None):
     """Parameters of a benchmark script's ``main`` (``key=value`` overrides of ``defaults``);
     ``None`` after running ``child(params)`` when ``params["mode"]`` is ``child_mode`` (the

@@ -1,17 +1,21 @@
 """One dynamic-relaxation iteration of the main job's wall, by thread count and OpenMP wait policy.
 
 Builds the coarse S5 wall of ``dr-masonry run squat_wall``, runs ``rows`` push rows to reach a
-state with damaged joints, then times ``relax`` for ``iters`` iterations with tol 0 (``repeats``
-batches; best and median per iteration) and its parallel pieces: ``element_and_contact_forces``
+state with damaged joints (or, with ``file=<run>.h5 scene=<name>``, takes the state of a stored
+run's checkpoint, e.g. the half house of ``terraced_house`` on its rocking plateau), then times
+``relax`` for ``iters`` iterations with tol 0 (``repeats`` batches; best and median per
+iteration, and the best per node) and its parallel pieces: ``element_and_contact_forces``
 (hexahedra and contact points, one region), ``gather_pair`` (node forces, one region) and
 ``internal_forces`` (both, plus the energy sums); ``rest`` = iteration - internal forces (the
 residual, damping and update passes over the nodes and the serial remainder, BENCHMARKS.md
-section 35); ``forces_full_update``: the forces again with every element
-through the full Gauss-point state update (the pristine elements' skip switched off). Every (threads, policy) setting runs in a process of its
-own, since OpenMP reads ``OMP_WAIT_POLICY`` when it starts. BENCHMARKS.md section 16.
+section 35); ``forces_full_update``: the forces again with every element through the full
+Gauss-point state update (the pristine elements' skip switched off); ``hexahedra`` and
+``contacts``: the two halves of the force kernel alone (``hex_forces``, ``contact_forces``), also
+per hexahedron and per contact point. Every (threads, policy) setting runs in a process of its
+own, since OpenMP reads ``OMP_WAIT_POLICY`` when it starts. BENCHMARKS.md sections 16 and 38.
 
 Run: ``python benchmarks/iteration.py [threads=1,2 policies=PASSIVE,ACTIVE rows=8 iters=400
-repeats=15]`` (about 1 min per setting); writes ``benchmarks/out/iteration.csv``.
+repeats=15 file= scene= tag=]`` (about 1 min per setting); writes ``benchmarks/out/iteration<tag>.csv``.
 """
 import json
 import os
@@ -19,7 +23,7 @@ import time
 
 import numpy as np
 
-from common import ROOT, child_row, report, start  # noqa: I100  (script folder on sys.path)
+from common import ROOT, child_row, report, start, stored_run  # noqa: I100  (script folder on sys.path)
 
 PARAMS = dict(
     threads="1,2",
@@ -28,6 +32,9 @@ PARAMS = dict(
     iters=400,       # iterations per timed batch
     repeats=15,
     mode="all",      # "all", or "child" (one setting, used by the subprocesses)
+    file="",         # a stored run (.h5) whose checkpoint state is timed instead of the S5 wall
+    scene="",        # the scene of ``file`` (e.g. terraced_house)
+    tag="",          # suffix of the CSV name
 )
 
 
@@ -45,16 +52,15 @@ def best_median(f, repeats):
 def child(params):
     """Time one setting (this process's threads and wait policy); prints one JSON line."""
     import numba
-    from cases import squat_wall
-    from dr_masonry import Stage
     from dr_masonry.kernels import relaxation as R
     from dr_masonry.kernels.assembly import gather_pair
-    p = dict(squat_wall.PARAMS, out=os.path.join(ROOT, "benchmarks", "out", "iteration"),
-             h5=None, progress=False)
-    sim, stages = squat_wall.build(p)
-    push = stages[1].controls[0]
-    push.path = push.path[:params["rows"]]
-    sim.run([stages[0], Stage("push", params["rows"], [push], frames=1000)])
+    from dr_masonry.kernels.contact_forces import contact_forces
+    from dr_masonry.kernels.hex8 import hex_forces
+    if params["file"]:
+        sim = stored_run(params["scene"], params["file"], "iteration_state")[0]
+        sim.resume(sim.output)
+    else:
+        sim = wall_state(params["rows"])
     m, c, d, o = sim.mesh, sim.cont, sim.dyn, sim.options
     info = np.zeros(R.N_INFO)
     n = params["iters"]
@@ -82,6 +88,12 @@ def child(params):
     for name, f in (("iteration", iterations),
                     ("forces", pieces(lambda: R.element_and_contact_forces(d.X, d.U, m, c))),
                     ("forces_full_update", pieces(full_update)),
+                    ("hexahedra", pieces(lambda: hex_forces(
+                        d.U, m.conn, m.active, m.dN, m.geo, m.wdet, m.h, m.emat, m.mparams,
+                        m.s_old, m.s_new, m.pristine, m.dirty, m.fbuf, m.energy))),
+                    ("contacts", pieces(lambda: contact_forces(
+                        d.X, d.U, c.slave, c.master, c.xi, c.area, c.law, c.lparams, c.gap0,
+                        c.s_old, c.s_new, c.gaps, c.trac, c.fbuf, c.psi))),
                     ("gather", pieces(lambda: gather_pair(m.fbuf.reshape((-1, 3)), m.ptr, m.rows,
                                                           c.fbuf, c.ptr, c.rows, d.fint))),
                     ("internal_forces", pieces(lambda: R.internal_forces(m, c, d)))):
@@ -89,7 +101,23 @@ def child(params):
         out[f"{name}_us_best"] = b * us
         out[f"{name}_us_median"] = med * us
     out["rest_us_best"] = out["iteration_us_best"] - out["internal_forces_us_best"]
+    out["ns_per_node_iteration"] = out["iteration_us_best"] * 1e3 / out["nodes"]
+    out["ns_per_hexahedron"] = out["hexahedra_us_best"] * 1e3 / max(out["hexahedra"], 1)
+    out["ns_per_contact_point"] = out["contacts_us_best"] * 1e3 / max(out["contacts"], 1)
     print(json.dumps(out), flush=True)
+
+
+def wall_state(rows):
+    """The main job's coarse S5 wall after ``rows`` push rows (a state with damaged joints)."""
+    from cases import squat_wall
+    from dr_masonry import Stage
+    p = dict(squat_wall.PARAMS, out=os.path.join(ROOT, "benchmarks", "out", "iteration"),
+             h5=None, progress=False)
+    sim, stages = squat_wall.build(p)
+    push = stages[1].controls[0]
+    push.path = push.path[:rows]
+    sim.run([stages[0], Stage("push", rows, [push], frames=1000)])
+    return sim
 
 
 def main(argv=None):
@@ -101,10 +129,12 @@ def main(argv=None):
         for threads in params["threads"].split(","):
             env = dict(os.environ, OMP_WAIT_POLICY=policy, NUMBA_NUM_THREADS=threads)
             rows.append(child_row(__file__, ["mode=child"] + [
-                f"{k}={params[k]}" for k in ("rows", "iters", "repeats")], env))
+                f"{k}={params[k]}" for k in ("rows", "iters", "repeats", "file", "scene")], env))
             print(f"  {policy} x {threads}: {rows[-1]['iteration_us_median']:.0f} us per "
                   f"iteration (median)", flush=True)
-    report(rows, "iteration", "One S5 iteration in place by threads and wait policy, us")
+    what = f"{params['scene']} ({params['file']})" if params["file"] else "S5"
+    report(rows, "iteration" + params["tag"],
+           f"One {what} iteration in place by threads and wait policy, us")
 
 
 if __name__ == "__main__":

@@ -20,9 +20,6 @@ checks every 10). Run: ``python benchmarks/slow_increment.py file=results/terrac
 scene=terraced_house [rows=1 probe=20000 trace=60]``; writes ``benchmarks/out/
 slow_increment.csv`` (residual ratio per call). BENCHMARKS.md section 25.
 """
-import os
-import shutil
-
 import numpy as np
 
 import common
@@ -88,22 +85,12 @@ class Monitor:
 
 def main(argv=None):
     params = common.start(DEFAULTS, __doc__, argv)
-    from dr_masonry.cli import import_case
     from dr_masonry.params import ParameterError
-    from dr_masonry.results import open_result
     import dr_masonry.solver as S
-    if not os.path.isfile(params["file"]):
-        raise ParameterError(f"parameter file={params['file']!r}: no such result file")
     for key, low in (("rows", 1), ("probe", 0), ("trace", 2), ("top", 1)):
         if params[key] < low:
             raise ParameterError(f"parameter {key}={params[key]!r}: must be >= {low}")
-    mod = import_case(params["scene"])
-    os.makedirs(common.OUT, exist_ok=True)
-    copy = os.path.join(common.OUT, "slow_increment.h5")
-    shutil.copy(params["file"], copy)
-    stored = open_result(copy).config
-    run = {**mod.PARAMS, **stored, "h5": copy, "progress": False}  # keys newer than the file: defaults
-    sim, stages = mod.build(run)
+    sim, stages, copy = common.stored_run(params["scene"], params["file"], "slow_increment")
     sim.options.check_every = 1
     S.CALL_ITERATIONS = 1
     sim.resume(copy)
