@@ -135,7 +135,10 @@ def joint_point(p, u, d1, d2, s_old, s_new, t):
         t[2] = kss * d2
         return
     umax = max(s_old[JS_UMAX], u)
-    dmag = np.hypot(d1, d2)
+    # sqrt of the squares, not np.hypot: hypot's guard against overflow cost 15-20 % of a
+    # contact point's time (BENCHMARKS.md section 38); slips (m) and tractions (Pa) are far
+    # from where their squares over- or underflow
+    dmag = np.sqrt(d1 * d1 + d2 * d2)
     dmax = max(s_old[JS_DMAX], dmag)
     d_old = s_old[JS_D]
     if mode == MODE_DRY:
@@ -158,7 +161,7 @@ def joint_point(p, u, d1, d2, s_old, s_new, t):
     tf1 = kss * (d1 - dp1o)
     tf2 = kss * (d2 - dp2o)
     cap = p[P_MU] * max(-sigma, 0.0)
-    tfn = np.hypot(tf1, tf2)
+    tfn = np.sqrt(tf1 * tf1 + tf2 * tf2)
     if tfn > cap:
         sc = cap / tfn
         tf1 *= sc
@@ -168,6 +171,12 @@ def joint_point(p, u, d1, d2, s_old, s_new, t):
     t[0] = sigma
     t[1] = (1.0 - dam) * kss * d1 + dam * tf1
     t[2] = (1.0 - dam) * kss * d2 + dam * tf2
+    s_new[JS_UMAX] = umax
+    s_new[JS_DMAX] = dmax
+    s_new[JS_DP1] = dp1
+    s_new[JS_DP2] = dp2
+    if dam == 0.0 and d_old == 0.0:   # undamaged: both dissipation terms below are exactly 0
+        return
     # dissipation, midpoint rule between the committed and the new state
     g1o = s_old[JS_G1]
     g2o = s_old[JS_G2]
@@ -184,10 +193,6 @@ def joint_point(p, u, d1, d2, s_old, s_new, t):
     s_new[JS_DISS] = s_old[JS_DISS] + y * (dam - d_old) + friction
     s_new[JS_DISSF] = s_old[JS_DISSF] + friction
     s_new[JS_D] = dam
-    s_new[JS_UMAX] = umax
-    s_new[JS_DMAX] = dmax
-    s_new[JS_DP1] = dp1
-    s_new[JS_DP2] = dp2
 
 
 @pjit
