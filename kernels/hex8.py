@@ -20,8 +20,8 @@ Conventions
 import numpy as np
 
 from .config import ijit, jit, pjit, prange
-from .plastic_damage import (MP_ELASTIC, MS_EPSP, MS_SBC, MS_SBT, NMS, elastic_stress, gp_update,
-                             surely_elastic, trial_stress)
+from .plastic_damage import (MP_ELASTIC, MP_SBC0, MP_SBT0, MS_EPSP, NMS, elastic_stress,
+                             gp_update, surely_elastic, trial_stress)
 
 CORNERS = np.array(
     [[-1, -1, -1], [1, -1, -1], [1, 1, -1], [-1, 1, -1],
@@ -327,11 +327,10 @@ def hex_chunk(lo, hi, U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old
             hex_gauss_strain(ue, dng, F, eps)
             w = wdet[e, g]
             acc = 0.0
-            if fast:
-                so = s_old[e, g]
+            if fast:   # the committed state is the virgin one: its strengths are the material's
                 i1, q, d0, d1, d2, d3, d4, d5 = trial_stress(p, eps[0], eps[1], eps[2], eps[3],
                                                              eps[4], eps[5])
-                if surely_elastic(p, i1, q, so[MS_SBT], so[MS_SBC]):
+                if surely_elastic(p, i1, q, p[MP_SBT0], p[MP_SBC0]):
                     m0 = i1 / 3.0
                     sig[0] = m0 + d0
                     sig[1] = m0 + d1

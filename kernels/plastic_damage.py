@@ -43,6 +43,8 @@ MP_NC = 14       #: used points of the compression table
 MP_RHO = 15      #: density, kg/m^3
 MP_TAB = 16      #: start of the tables
 NMP = MP_TAB + 8 * NTAB
+MP_SBT0 = MP_TAB + 2 * NTAB  #: first stress of the tension table: the virgin effective strength, Pa
+MP_SBC0 = MP_TAB + 6 * NTAB  #: first stress of the compression table, Pa
 
 MS_DT = 0        #: tensile damage dt
 MS_DC = 1        #: compressive damage dc

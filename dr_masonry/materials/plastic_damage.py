@@ -218,8 +218,8 @@ class PlasticDamage:
         """Virgin Gauss-point state (NMS,) float64."""
         s = np.zeros(kpd.NMS)
         if not self.stays_elastic:
-            s[kpd.MS_SBT] = self._params[kpd.MP_TAB + 2 * kpd.NTAB]
-            s[kpd.MS_SBC] = self._params[kpd.MP_TAB + 6 * kpd.NTAB]
+            s[kpd.MS_SBT] = self._params[kpd.MP_SBT0]
+            s[kpd.MS_SBC] = self._params[kpd.MP_SBC0]
         return s
 
     @property
