@@ -15,7 +15,8 @@ per hexahedron and per contact point. Every (threads, policy) setting runs in a 
 own, since OpenMP reads ``OMP_WAIT_POLICY`` when it starts. BENCHMARKS.md sections 16 and 38.
 
 Run: ``python benchmarks/iteration.py [threads=1,2 policies=PASSIVE,ACTIVE rows=8 iters=400
-repeats=15 file= scene= tag=]`` (about 1 min per setting); writes ``benchmarks/out/iteration<tag>.csv``.
+repeats=15 file= scene= tag=]`` (about 1 min per setting); writes
+``benchmarks/out/iteration<tag>.csv``.
 """
 import json
 import os

@@ -211,8 +211,9 @@ def firstcall():
         relax(*gravity(sim))
         t["relax_s"] = time.perf_counter() - t1
     t["production_total_s"] = time.perf_counter() - t0
-    for name, fn, args in (("hex_forces_s", hex_forces, hex_args(sim, displacement(sim, 1e-5, 0), False)),
-                           ("contact_forces_s", contact_forces, contact_args(sim, displacement(sim, 0, 1e-7)))):
+    for name, fn, args in (
+            ("hex_forces_s", hex_forces, hex_args(sim, displacement(sim, 1e-5, 0), False)),
+            ("contact_forces_s", contact_forces, contact_args(sim, displacement(sim, 0, 1e-7)))):
         t1 = time.perf_counter()
         fn(*args)
         t[name] = time.perf_counter() - t1
