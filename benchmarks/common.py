@@ -70,10 +70,10 @@ def child_row(script, overrides, env=None):
 
 
 def stored_run(scene, path, name):
-    """(simulation, stages, module) of scene ``scene`` set up from a copy of its result file
-    ``path`` (``out/<name>.h5``) with the parameters stored in it and its checkpoint loaded
-    (``Simulation.resume``): running it continues the stored run without touching the original.
-    A ParameterError names a missing file."""
+    """(simulation, stages, copy) of scene ``scene`` set up from ``copy`` = ``out/<name>.h5``, a
+    copy of its result file ``path``, with the parameters stored in it (not yet resumed:
+    ``sim.resume(copy)`` loads the checkpoint, and running then continues the stored run without
+    touching the original). A ParameterError names a missing file."""
     import shutil
     from dr_masonry.cli import import_case
     from dr_masonry.params import ParameterError

@@ -58,8 +58,8 @@ def child(params):
     from dr_masonry.kernels.contact_forces import contact_forces
     from dr_masonry.kernels.hex8 import hex_forces
     if params["file"]:
-        sim = stored_run(params["scene"], params["file"], "iteration_state")[0]
-        sim.resume(sim.output)
+        sim, _, copy = stored_run(params["scene"], params["file"], "iteration_state")
+        sim.resume(copy)
     else:
         sim = wall_state(params["rows"])
     m, c, d, o = sim.mesh, sim.cont, sim.dyn, sim.options

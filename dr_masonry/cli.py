@@ -133,8 +133,11 @@ def _changed(config, later):
     to another value (``resume`` left out; ``solver.X`` left out where ``X`` says the same)."""
     a, b = _flat(config), _flat(later)
     diff = {k: (a.get(k), v) for k, v in b.items() if k != "resume" and a.get(k) != v}
-    return {k: v for k, v in diff.items()
-            if not (k.startswith("solver.") and diff.get(k[7:], (None, object()))[1] == v[1])}
+
+    def echoed(k, new):   # solver.X set to the value X is set to
+        top = k.removeprefix("solver.")
+        return top != k and top in diff and diff[top][1] == new
+    return {k: v for k, v in diff.items() if not echoed(k, v[1])}
 
 
 def _above_tol(config, history):
