@@ -22,6 +22,7 @@ from .kernels.contact_forces import contact_rowsum
 from .kernels.hex8 import hex_geometry_shared, lumped_mass, pristine_elements, stiffness_rowsum
 from .kernels.joint_law import JS_D, JS_DISS, JS_DISSF
 from .kernels.plastic_damage import MP_HMAX, MS_DC, MS_DISS, MS_DT
+from .precompile import ensure_compiled
 
 Mesh = namedtuple("Mesh", "conn active dN geo wdet h emat mparams s_old s_new pristine dirty fbuf "
                          "energy ptr rows")
@@ -595,6 +596,7 @@ class Simulation:
         """
         if not self._built:
             self.build()
+        ensure_compiled(self.mesh, self.cont, self.dyn)
         for stage in stages:  # register every prescribed node set so history columns stay fixed
             for ctl in stage.controls:
                 if isinstance(ctl, (L.Displacement, L.Indirect)) and isinstance(ctl.target, L.NodeSet):

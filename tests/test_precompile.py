@@ -1,0 +1,94 @@
+"""The cold start's second process (``dr_masonry.precompile``): used only when the force kernel
+is in no cache, switched off by its environment variable, and a failing worker costs nothing but
+a warning."""
+import json
+import os
+import subprocess
+import sys
+import textwrap
+import warnings
+
+import pytest
+
+from dr_masonry import JointLaw, Load, Model, PlasticDamage, Simulation, SolverOptions, Stage
+from dr_masonry import precompile as P
+from dr_masonry.geometry import BrickSpec, add_wall, plane_nodes
+from dr_masonry.loading import Gravity
+
+
+def tiny_wall():
+    """Simulation of a two-brick wall clamped at its base (also imported by the cold start's
+    subprocess below)."""
+    model = Model()
+    model.set_joint_law(JointLaw.reference())
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # length snapped to half bricks
+        add_wall(model, (0, 0, 0), 0.44, 0.243, PlasticDamage.reference(),
+                 brick=BrickSpec(nx_along=2, ny_thick=1, nz_height=1))
+    sim = Simulation(model, SolverOptions(progress=False))
+    sim.fix(plane_nodes(model, 2, 0.0), "xyz")
+    return sim
+
+
+def gravity():
+    """One increment of self-weight."""
+    return [Stage("gravity", 1, [Load(pattern=Gravity(), to=1.0)])]
+
+
+@pytest.fixture
+def no_worker(monkeypatch):
+    """Fail the test if a worker process is started."""
+    def popen(*a, **k):
+        raise AssertionError("a compile worker was started")
+    monkeypatch.setattr(P.subprocess, "Popen", popen)
+
+
+def test_warm_kernels_start_no_worker(no_worker):
+    sim = tiny_wall()
+    sim.run(gravity())   # compiled (or loaded) in this process
+    assert P.ensure_compiled(sim.mesh, sim.cont, sim.dyn) is False
+
+
+def test_switched_off_by_the_environment(monkeypatch, no_worker):
+    sim = tiny_wall()
+    sim.build()
+    monkeypatch.setattr(P, "_cached", lambda name, sig: False)   # as if the cache were cold
+    monkeypatch.setenv(P.ENV_SWITCH, "0")
+    assert P.ensure_compiled(sim.mesh, sim.cont, sim.dyn) is False
+
+
+def test_a_failing_worker_is_reported_and_the_run_goes_on(monkeypatch):
+    sim = tiny_wall()
+    sim.build()
+    monkeypatch.setattr(P, "_cached", lambda name, sig: False)
+    monkeypatch.setattr(P.sys, "executable", "false")   # exits 1 at once
+    with pytest.warns(RuntimeWarning, match="compile worker failed"):
+        assert P.ensure_compiled(sim.mesh, sim.cont, sim.dyn) is True
+    monkeypatch.undo()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        sim.run(gravity())
+
+
+@pytest.mark.slow
+def test_cold_start_compiles_the_force_kernel_in_the_worker_only(tmp_path):
+    """Empty cache: the run's process compiles ``relax`` and the node passes, never the force
+    kernel or the return mapping (the worker's), so the signatures agree with ``relax``'s."""
+    script = textwrap.dedent(f"""\
+        import json, sys
+        from numba.core import event
+        sys.path.insert(0, {os.path.dirname(__file__)!r})
+        from test_precompile import gravity, tiny_wall
+        sim = tiny_wall()
+        with event.install_recorder("numba:compile") as rec:
+            sim.run(gravity())
+        print(json.dumps(sorted({{ev.data["dispatcher"].py_func.__qualname__
+                                  for _, ev in rec.buffer if ev.is_start}})))
+        """)
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path))
+    env.pop(P.ENV_SWITCH, None)
+    out = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True,
+                         check=True, timeout=600)
+    compiled = set(json.loads(out.stdout.strip().splitlines()[-1]))
+    assert {"relax", "gather_residual", "update_nodes"} <= compiled
+    assert not compiled & {"element_and_contact_forces", "gp_update", "offset_forces"}
