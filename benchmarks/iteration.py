@@ -10,7 +10,7 @@ iteration, and the best per node) and its parallel pieces: ``element_and_contact
 residual, damping and update passes over the nodes and the serial remainder, BENCHMARKS.md
 section 35); ``forces_full_update``: the forces again with every element through the full
 Gauss-point state update (the pristine elements' skip switched off); ``hexahedra`` and
-``contacts``: the two halves of the force kernel alone (``hex_forces``, ``contact_forces``), also
+``contacts``: the two halves of the force kernel alone (the other set empty), also
 per hexahedron and per contact point. Every (threads, policy) setting runs in a process of its
 own, since OpenMP reads ``OMP_WAIT_POLICY`` when it starts. BENCHMARKS.md sections 16 and 38.
 
@@ -55,8 +55,7 @@ def child(params):
     import numba
     from dr_masonry.kernels import relaxation as R
     from dr_masonry.kernels.assembly import gather_pair
-    from dr_masonry.kernels.contact_forces import contact_forces
-    from dr_masonry.kernels.hex8 import hex_forces
+    from dr_masonry.kernels.forces import NO_CONTACTS, NO_ELEMENTS
     if params["file"]:
         sim, _, copy = stored_run(params["scene"], params["file"], "iteration_state")
         sim.resume(copy)
@@ -89,12 +88,10 @@ def child(params):
     for name, f in (("iteration", iterations),
                     ("forces", pieces(lambda: R.element_and_contact_forces(d.X, d.U, m, c))),
                     ("forces_full_update", pieces(full_update)),
-                    ("hexahedra", pieces(lambda: hex_forces(
-                        d.U, m.conn, m.active, m.dN, m.geo, m.wdet, m.h, m.emat, m.mparams,
-                        m.s_old, m.s_new, m.pristine, m.dirty, m.fbuf, m.energy))),
-                    ("contacts", pieces(lambda: contact_forces(
-                        d.X, d.U, c.slave, c.master, c.xi, c.area, c.law, c.lparams, c.gap0,
-                        c.s_old, c.s_new, c.gaps, c.trac, c.fbuf, c.psi))),
+                    ("hexahedra", pieces(lambda: R.element_and_contact_forces(
+                        d.X, d.U, m, NO_CONTACTS))),
+                    ("contacts", pieces(lambda: R.element_and_contact_forces(
+                        d.X, d.U, NO_ELEMENTS, c))),
                     ("gather", pieces(lambda: gather_pair(m.fbuf.reshape((-1, 3)), m.ptr, m.rows,
                                                           c.fbuf, c.ptr, c.rows, d.fint))),
                     ("internal_forces", pieces(lambda: R.internal_forces(m, c, d)))):

@@ -206,7 +206,6 @@ def check_physics(model, sim, v0, dt, steps):
 
 def run_size(aka, div, params, phase, rows, checks):
     """Time (and, if ``checks`` is a list, check) one mesh ``div`` (nx, ny, nz) in ``phase``."""
-    from dr_masonry.kernels.hex8 import hex_forces
     from dr_masonry.kernels.relaxation import relax
     E, nu, rho = params["E"], params["nu"], params["rho"]
     sim = build_ours(div, params["edge"], E, nu, rho)
@@ -245,8 +244,8 @@ def run_size(aka, div, params, phase, rows, checks):
         add(f"akantu {variant} solveStep", *timed_cpu(model.solveStep, (), params), ne)
         del model, mesh
     d.V[:] = dt * v0
-    add("dr_masonry hex_forces", *timed_cpu(hex_forces, bench.hex_args(sim, d.U, True), params),
-        ne)
+    add("dr_masonry hex_forces", *timed_cpu(*bench.hex_call(bench.hex_args(sim, d.U, True)),
+                                            params), ne)
     args = relax_args(sim, params["relax_iters"], sim.options.ring)   # the production step
     add("dr_masonry relax step", *timed_cpu(relax, args, params), ne * params["relax_iters"])
     check_ran(args)

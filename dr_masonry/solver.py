@@ -19,14 +19,12 @@ from . import loading as L
 from .kernels import relaxation as R
 from .kernels.assembly import node_row_map
 from .kernels.contact_forces import contact_rowsum
+from .kernels.forces import Cont, Mesh
 from .kernels.hex8 import hex_geometry_shared, lumped_mass, pristine_elements, stiffness_rowsum
 from .kernels.joint_law import JS_D, JS_DISS, JS_DISSF
 from .kernels.plastic_damage import MP_HMAX, MS_DC, MS_DISS, MS_DT
 from .precompile import ensure_compiled
 
-Mesh = namedtuple("Mesh", "conn active dN geo wdet h emat mparams s_old s_new pristine dirty fbuf "
-                         "energy ptr rows")
-Cont = namedtuple("Cont", "slave master xi area law lparams gap0 s_old s_new gaps trac fbuf psi ptr rows")
 #: energies of an increment at its current state (:meth:`Simulation._energies`)
 Energies = namedtuple("Energies", "stored f_tot dw ratio diss")
 #: nodal state (n_nodes, 3) unless noted: X reference coordinates m, U displacements m, V velocities

@@ -6,7 +6,7 @@ as internal force +F on the slave node and -N_a F on master node a. Residual = e
 """
 import numpy as np
 
-from .config import ijit, jit, pjit, prange
+from .config import ijit, jit
 from .contact_frame import contact_frame, quad_tangents
 from .joint_law import JS_D, JS_DP1, JS_DP2, P_KC, P_KNN, P_KSS, joint_point
 
@@ -99,31 +99,11 @@ def offset_forces(xq, r, s, d, frame, jac, t, ar, fbuf, row):
         fbuf[row + a, 2] += ar * (g12 * dr + g22 * ds)
 
 
-@pjit
-def contact_forces(X, U, slave, master, xi, area, law, lparams, gap0, s_old, s_new, gaps, trac,
-                   fbuf, psi):
-    """Evaluate every contact point at current coordinates ``X + U`` (n_nodes, 3), m.
-
-    Parameters
-    ----------
-    X, U : (n_nodes, 3) reference coordinates and displacements, m.
-    slave (nc,), master (nc, 4), xi (nc, 2), area (nc,) m^2, law (nc,), lparams (n_laws, NJP),
-    gap0 (nc, 3) m : the contact set (docs/internals.md).
-    s_old, s_new : (nc, NJS) committed and updated joint histories.
-    gaps, trac : (nc, 3) written: local gap [u, d1, d2] (m) and tractions [sigma, tau1, tau2] (Pa).
-    fbuf : (nc * 5, 3) written: internal force on the slave (row 5c) and masters (5c + 1..4), N.
-    psi : (nc,) written: stored energy of each point, J.
-    """
-    nc = slave.shape[0]
-    for ch in prange((nc + CHUNK - 1) // CHUNK):
-        contact_chunk(ch * CHUNK, min(nc, (ch + 1) * CHUNK), X, U, slave, master, xi, area, law,
-                      lparams, gap0, s_old, s_new, gaps, trac, fbuf, psi)
-
 
 @ijit
 def contact_chunk(lo, hi, X, U, slave, master, xi, area, law, lparams, gap0, s_old, s_new, gaps,
                   trac, fbuf, psi):
-    """Points ``lo:hi`` of :func:`contact_forces` (one parallel task, its own scratch)."""
+    """Points ``lo:hi`` of :func:`.forces.contact_forces` (one parallel task, its own scratch)."""
     xq = np.empty((4, 3))
     xm = np.empty(3)
     frame = np.empty((3, 3))

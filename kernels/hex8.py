@@ -256,55 +256,11 @@ def hex_add_gauss_force(F, sig, dng, w, fe):
             fe[a, i] += p0 * dng[a, 0] + p1 * dng[a, 1] + p2 * dng[a, 2]
 
 
-@pjit
-def hex_forces(U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old, s_new, pristine,
-               dirty, f_elem, energy):
-    """Internal forces and stored elastic energy of the ``active`` elements (parallel, race-free).
-
-    Parameters
-    ----------
-    U : (n_nodes, 3) float64, m
-        nodal displacements.
-    conn : (ne, 8) int64
-        node ids per element.
-    active : (na,) int64
-        element ids to compute; other elements are untouched.
-    dN, geo, wdet, h
-        from :func:`hex_geometry_shared` or :func:`hex_geometry`: element e reads table
-        ``dN[geo[e]]``.
-    elem_mat : (ne,) int64
-        row of ``params`` for each element.
-    params : (nmat, NMP) float64
-        ``PlasticDamage.params_array()`` rows; a row with ``p[MP_ELASTIC] == 1`` takes the
-        elastic fast path (``elastic_stress``, no state read or written).
-    s_old, s_new : (ne, 8, NMS) float64
-        committed (read) and trial (written by ``gp_update``; not for elastic materials)
-        Gauss-point states.
-    pristine : (ne,) uint8
-        1 where the committed state of every Gauss point is the material's virgin state
-        (:func:`pristine_elements`): while all its points stay surely elastic the element takes
-        the elastic path of its material without reading or writing the state (the trial state
-        is then the committed one; bit for bit the forces of ``gp_update``).
-    dirty : (ne,) uint8
-        read and written: 1 where ``s_new`` may differ from ``s_old`` (a pristine element that
-        went through ``gp_update``); such an element is reset to ``s_old`` when it is back in
-        its elastic range. Zero wherever ``s_new`` equals ``s_old`` (after a commit).
-    f_elem : (ne, 8, 3) float64, N
-        element internal forces, written.
-    energy : (ne,) float64, J
-        stored elastic energy sum_g wdet 0.5 S : (E - E_p), written (E_p = 0 for a
-        material with ``p[MP_ELASTIC] == 1``).
-    """
-    na = active.shape[0]
-    for c in prange((na + CHUNK - 1) // CHUNK):
-        hex_chunk(c * CHUNK, min(na, (c + 1) * CHUNK), U, conn, active, dN, geo, wdet, h,
-                  elem_mat, params, s_old, s_new, pristine, dirty, f_elem, energy)
-
 
 @ijit
 def hex_chunk(lo, hi, U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old, s_new, pristine,
               dirty, f_elem, energy):
-    """Elements ``active[lo:hi]`` of :func:`hex_forces` (one parallel task, its own scratch)."""
+    """Elements ``active[lo:hi]`` of :func:`.forces.hex_forces` (one parallel task, its own scratch)."""
     ue = np.empty((8, 3))
     F = np.empty((3, 3))
     eps = np.empty(6)
@@ -366,7 +322,7 @@ def hex_chunk(lo, hi, U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old
 
 def pristine_elements(s_old, s_virgin, h, h_max):
     """Elements whose committed Gauss-point states are all virgin: (ne,) uint8 for
-    ``hex_forces``.
+    :func:`.forces.hex_forces`.
 
     ``s_old`` (ne, 8, NMS) committed states, ``s_virgin`` (ne, NMS) each element's material's
     initial state, ``h`` (ne,) m element lengths and ``h_max`` (ne,) m their materials' largest
@@ -437,7 +393,7 @@ def stiffness_rowsum(conn, dN, geo, wdet, E, nu, n_nodes):
 
     For each element, the absolute row sums of its 24x24 reference stiffness, max over the
     node's 3 dofs, summed over the node's elements: bounds every row sum of the assembled K.
-    ``dN``, ``wdet``, ``geo`` as for :func:`hex_forces`; ``E`` (ne,) Pa and ``nu`` (ne,) per
+    ``dN``, ``wdet``, ``geo`` as for :func:`.forces.hex_forces`; ``E`` (ne,) Pa and ``nu`` (ne,) per
     element.
     """
     ne = wdet.shape[0]

@@ -17,20 +17,15 @@ negative. FIRE measures velocities and forces in the metric of the fictitious ma
 ``v <- (1 - a) v + a |v|_M M^-1 F / |M^-1 F|_M`` (``|v|_M^2 = v.M v``, ``|M^-1 F|_M^2 = F.M^-1 F``)
 never raises the kinetic energy; the reference points' DOFs take part with their masses.
 
-Arrays are grouped in three named tuples built by ``dr_masonry.solver``:
-``mesh``: hexahedra (conn, active, dN, geo, wdet, h, emat, mparams, s_old, s_new, pristine, dirty, fbuf,
-energy, ptr, rows);
-``cont``: contact points (slave, master, xi, area, law, lparams, gap0, s_old, s_new, gaps, trac,
-fbuf, psi, ptr, rows); ``dyn``: nodal and reference-point state (the ``Dyn`` named tuple in ``dr_masonry.solver``).
+Arrays are grouped in three named tuples built by ``dr_masonry.solver``: ``mesh`` (hexahedra)
+and ``cont`` (contact points), the ``Mesh`` and ``Cont`` of :mod:`.forces`, and ``dyn``, the nodal
+and reference-point state (the ``Dyn`` named tuple in ``dr_masonry.solver``).
 """
 import numpy as np
 
 from .assembly import gather_node, gather_pair
 from .config import ijit, jit, pjit, prange
-from .contact_forces import CHUNK as CONTACT_CHUNK
-from .contact_forces import contact_chunk
-from .hex8 import CHUNK as HEX_CHUNK
-from .hex8 import hex_chunk
+from .forces import element_and_contact_forces
 
 DAMP_KINETIC = 0
 DAMP_VISCOUS = 1
@@ -136,32 +131,6 @@ def place_rigid_nodes(dyn):
                 dyn.U[i, k] = (dyn.rpU[p, k] + R[k, 0] * d0 + R[k, 1] * d1 + R[k, 2] * d2
                                - (d0 if k == 0 else (d1 if k == 1 else d2)))
 
-
-@pjit
-def element_and_contact_forces(X, U, mesh, cont):
-    """``hex_forces`` of ``mesh.active`` and ``contact_forces`` of every contact point as the
-    tasks of one parallel region (one wake-up of the threads instead of two); writes
-    ``mesh.fbuf``, ``mesh.energy`` and ``cont``'s outputs. ``X``, ``U``: (n_nodes, 3), m.
-
-    Numba splits a ``prange`` into one block per thread, so the hexahedron tasks (about 7 x a
-    contact task in the elastic range) are spread evenly over the range to balance the blocks."""
-    na = mesh.active.shape[0]
-    nc = cont.slave.shape[0]
-    nh = (na + HEX_CHUNK - 1) // HEX_CHUNK
-    nt = nh + (nc + CONTACT_CHUNK - 1) // CONTACT_CHUNK
-    for t in prange(nt):
-        j = (t + 1) * nh // nt   # hexahedron tasks among the first t + 1
-        if j > t * nh // nt:
-            hc = j - 1
-            hex_chunk(hc * HEX_CHUNK, min(na, (hc + 1) * HEX_CHUNK), U, mesh.conn, mesh.active,
-                      mesh.dN, mesh.geo, mesh.wdet, mesh.h, mesh.emat, mesh.mparams,
-                      mesh.s_old, mesh.s_new, mesh.pristine, mesh.dirty, mesh.fbuf, mesh.energy)
-        else:
-            c = t - j
-            contact_chunk(c * CONTACT_CHUNK, min(nc, (c + 1) * CONTACT_CHUNK), X, U,
-                          cont.slave, cont.master, cont.xi, cont.area, cont.law, cont.lparams,
-                          cont.gap0, cont.s_old, cont.s_new, cont.gaps, cont.trac, cont.fbuf,
-                          cont.psi)
 
 
 @jit

@@ -1,15 +1,15 @@
 """Race-free assembly and the fused force kernel of one relaxation iteration: ``gather_pair``
 against numpy's unbuffered ``np.add.at``, and ``element_and_contact_forces`` (hexahedra and
-contact points as interleaved tasks of one parallel region) against the two kernels called
-one after the other."""
+contact points as interleaved tasks of one parallel region) against its calls on each set
+alone (``hex_forces``, ``contact_forces``: the other set empty, no interleaving)."""
 import numpy as np
 import pytest
 
 from dr_masonry import JointLaw, Model, PlasticDamage, Simulation
 from dr_masonry.kernels import relaxation as R
 from dr_masonry.kernels.assembly import gather_pair, node_row_map
-from dr_masonry.kernels.contact_forces import contact_forces
-from dr_masonry.kernels.hex8 import CHUNK, hex_forces
+from dr_masonry.kernels.forces import contact_forces, hex_forces
+from dr_masonry.kernels.hex8 import CHUNK
 
 RNG = np.random.default_rng(11)
 
@@ -46,8 +46,8 @@ def _wall(n_blocks):
 @pytest.mark.parametrize("n_blocks", [1, 6, 13])
 def test_fused_forces_equal_the_two_kernels(n_blocks):
     """Every hexahedron task and every contact task runs once: the fused kernel's outputs are
-    bit for bit those of ``hex_forces`` then ``contact_forces``, with strains that crack and
-    crush some Gauss points and open some joints."""
+    bit for bit those of ``hex_forces`` then ``contact_forces`` (each set alone), with strains
+    that crack and crush some Gauss points and open some joints."""
     sim = _wall(n_blocks)
     m, c, d = sim.mesh, sim.cont, sim.dyn
     assert (m.active.size > CHUNK) == (n_blocks > 5)
@@ -76,3 +76,15 @@ def test_fused_forces_equal_the_two_kernels(n_blocks):
     np.add.at(ref, nodes, c.fbuf)
     assert np.allclose(d.fint, ref, rtol=1e-12, atol=1e-9 * np.abs(ref).max())
     assert e == pytest.approx(m.energy[m.active].sum() + c.psi.sum(), rel=1e-12)
+
+
+def test_single_set_calls_run_the_compiled_kernel_of_a_run():
+    """``hex_forces`` and ``contact_forces`` pass the force kernel tuples of the same Numba types
+    as a run's, with the other set empty: they call its compiled code, compile nothing new."""
+    from numba import typeof
+    from dr_masonry.kernels.forces import NO_CONTACTS, NO_ELEMENTS, contact_set, hex_set
+    sim = _wall(2)
+    m, c = sim.mesh, sim.cont
+    assert typeof(NO_CONTACTS) == typeof(c) and typeof(NO_ELEMENTS) == typeof(m)
+    assert typeof(hex_set(*m[:14])) == typeof(m)
+    assert typeof(contact_set(*c[:13])) == typeof(c)

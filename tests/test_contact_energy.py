@@ -13,7 +13,8 @@ import pytest
 
 from dr_masonry import JointLaw, Model, PlasticDamage
 from dr_masonry.contact_search import detect_contacts
-from dr_masonry.kernels.contact_forces import contact_forces, contact_rowsum
+from dr_masonry.kernels.contact_forces import contact_rowsum
+from dr_masonry.kernels.forces import contact_forces
 from dr_masonry.kernels.joint_law import NJS
 
 MAT = PlasticDamage.elastic(10e9, 0.2, 2000.0)

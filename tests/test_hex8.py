@@ -5,7 +5,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 import naive_hex8 as nv
-from dr_masonry.kernels import hex8
+from dr_masonry.kernels import forces, hex8
 from dr_masonry.kernels.assembly import gather_pair, node_row_map
 from dr_masonry.kernels.plastic_damage import MP_HMAX, NMS
 from dr_masonry.materials.plastic_damage import PlasticDamage
@@ -57,7 +57,7 @@ def run_forces(U, X, conn, E, nu, elem_mat=None, params=None):
     s_new = np.zeros((ne, 8, NMS))
     f_elem = np.full((ne, 8, 3), np.nan)
     energy = np.full(ne, np.nan)
-    hex8.hex_forces(np.ascontiguousarray(U, dtype=float), conn, np.arange(ne), dN, geo, wdet, h,
+    forces.hex_forces(np.ascontiguousarray(U, dtype=float), conn, np.arange(ne), dN, geo, wdet, h,
                     elem_mat, params, s_old, s_new, *_flags(ne), f_elem, energy)
     f_node = np.zeros_like(X)
     np.add.at(f_node, conn.ravel(), f_elem.reshape(-1, 3))
@@ -178,7 +178,7 @@ def test_damaging_material_below_cracking_is_elastic():
     s_old = np.tile(mat.initial_state(), (1, 8, 1))
     s_new = np.full_like(s_old, np.nan)
     f_elem, energy = np.empty((1, 8, 3)), np.empty(1)
-    hex8.hex_forces(U, conn, np.array([0]), dN, geo, wdet, h, np.zeros(1, np.int64),
+    forces.hex_forces(U, conn, np.array([0]), dN, geo, wdet, h, np.zeros(1, np.int64),
                     mat.params_array()[None, :], s_old, s_new, *_flags(1), f_elem, energy)
     f_ref, en_ref, _, _ = nv.element_forces(X, U, 5e9, 0.15)
     assert np.abs(f_elem[0] - f_ref).max() <= 1e-10 * np.abs(f_ref).max()
@@ -203,9 +203,9 @@ def test_pristine_elements_skip_the_state_bit_for_bit():
     assert np.all(pristine == 1)
     args = (conn, np.arange(ne), dN, geo, wdet, h, np.zeros(ne, np.int64), p[None, :], s_old)
 
-    def forces(U, s_new, pristine, dirty):
+    def evaluate(U, s_new, pristine, dirty):
         f, en = np.full((ne, 8, 3), np.nan), np.full(ne, np.nan)
-        hex8.hex_forces(U, *args, s_new, pristine, dirty, f, en)
+        forces.hex_forces(U, *args, s_new, pristine, dirty, f, en)
         return f, en
 
     elastic = rng.uniform(-2e-7, 2e-7, X.shape)
@@ -214,8 +214,8 @@ def test_pristine_elements_skip_the_state_bit_for_bit():
     fast_new, dirty = s_old.copy(), np.zeros(ne, np.uint8)
     for U in (elastic, cracking, elastic, cracking):
         full_new = np.full_like(s_old, np.nan)
-        f_full, en_full = forces(U, full_new, *_flags(ne))
-        f_fast, en_fast = forces(U, fast_new, pristine, dirty)
+        f_full, en_full = evaluate(U, full_new, *_flags(ne))
+        f_fast, en_fast = evaluate(U, fast_new, pristine, dirty)
         assert np.array_equal(f_fast, f_full) and np.array_equal(en_fast, en_full)
         assert np.array_equal(fast_new, full_new)       # the trial state, wherever it was kept
         changed = np.any(full_new != s_old, axis=(1, 2))
@@ -240,7 +240,7 @@ def test_inactive_elements_untouched():
     energy = np.full(ne, -7.0)
     s_old, s_new = np.zeros((ne, 8, NMS)), np.full((ne, 8, NMS), -7.0)
     active = np.array([4, 1], dtype=np.int64)
-    hex8.hex_forces(rng.normal(0, 1e-3, X.shape), conn, active, dN, geo, wdet, h,
+    forces.hex_forces(rng.normal(0, 1e-3, X.shape), conn, active, dN, geo, wdet, h,
                     np.zeros(ne, np.int64), params, s_old, s_new, *_flags(ne), f_elem, energy)
     idle = np.setdiff1d(np.arange(ne), active)
     assert np.all(f_elem[idle] == -7.0) and np.all(energy[idle] == -7.0)
@@ -347,7 +347,7 @@ def test_shared_tables_match_per_element_tables():
     out = []
     for d, g, w, hh in ((dN, geo, wdet, h), (dNe, geoe, wde, he)):
         f, en, sn = np.full((ne, 8, 3), np.nan), np.full(ne, np.nan), np.full_like(s_old, -1.0)
-        hex8.hex_forces(U, conn, np.arange(ne), d, g, w, hh, elem_mat, params, s_old, sn,
+        forces.hex_forces(U, conn, np.arange(ne), d, g, w, hh, elem_mat, params, s_old, sn,
                         *_flags(ne), f, en)
         out.append((f, en, sn))
     (f, en, sn), (fe, ene, sne) = out
