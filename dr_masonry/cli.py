@@ -95,7 +95,7 @@ def _cmd_info(args):
               + (", ".join(f"{key} {old!r} -> {new!r}" for key, (old, new) in changed.items())
                  or "same parameters"))
     print(f"history:   {r.n_history} rows, columns {list(r.history)}")
-    print(_above_tol(r.config, r.history))
+    print(_above_tol(r))
     ids = r.frame_ids
     print(f"frames:    {r.n_frames}" + (f" (increments {ids[0]} .. {ids[-1]})" if ids else ""))
     try:
@@ -140,14 +140,13 @@ def _changed(config, later):
     return {k: v for k, v in diff.items() if not echoed(k, v[1])}
 
 
-def _above_tol(config, history):
-    """One line: the rows whose residual ratio is above the run's ``tol`` (accepted at a floor,
-    ``SolverOptions.floor_tol``), or that there are none."""
-    tol = (config.get("solver") or {}).get("tol", config.get("tol"))
-    res = history.get("residual")
-    if tol is None or res is None or not len(res):
+def _above_tol(r):
+    """One line: the rows of result ``r`` whose residual ratio is above the run's ``tol``
+    (accepted at a floor, ``SolverOptions.floor_tol``), or that there are none."""
+    tol, rows = r.rows_above_tol()
+    res = r.history.get("residual")
+    if tol is None or not len(res):
         return "residual:  (no solver tolerance or residual column recorded)"
-    rows = np.flatnonzero(np.asarray(res) > tol * (1.0 + 1e-9))
     if not rows.size:
         return f"residual:  every row converged to tol {tol:g}"
     shown = ", ".join(str(i) for i in rows[:12]) + (", ..." if rows.size > 12 else "")

@@ -518,6 +518,16 @@ class Result:
                     return {k: v[()] for k, v in g["contacts"].items()}
         return self.model_arrays["contacts"]
 
+    def rows_above_tol(self):
+        """(tol, rows): the run's solver tolerance and the (k,) history rows whose residual
+        ratio is above it, i.e. accepted at a residual floor (``SolverOptions.floor_tol``);
+        (None, None) where the file records no tolerance or no residual column."""
+        tol = (self.config.get("solver") or {}).get("tol", self.config.get("tol"))
+        res = self.history.get("residual")
+        if tol is None or res is None:
+            return None, None
+        return tol, np.flatnonzero(np.asarray(res) > tol * (1.0 + 1e-9))
+
     def summary(self):
         """One-line description of the model size."""
         c = self.model_arrays["contacts"]

@@ -159,6 +159,32 @@ def test_plot_history_overlay(h5, tmp_path):
         plots.plot_history(h5, "disp", "force", tmp_path / "x.png", label=["a", "b"])
 
 
+def test_plot_history_marks_rows_accepted_above_tol(tmp_path, monkeypatch):
+    """Rows accepted at a residual floor (above the run's tol) get open circles on the curve."""
+    p = tmp_path / "floor.h5"
+    with ResultWriter(p, tiny_model(), {"solver": {"tol": 1e-4}}) as w:
+        for i, res in enumerate([9e-5, 5e-4, 1e-4, 8e-4]):
+            w.append_history({"increment": i, "residual": res, "disp": 1e-3 * i, "force": 1e3 * i})
+    assert open_result(p).rows_above_tol()[1].tolist() == [1, 3]
+    figs = []
+
+    class Recorded(plots.Figure):
+        def __init__(self, *a, **k):
+            super().__init__(*a, **k)
+            figs.append(self)
+    monkeypatch.setattr(plots, "Figure", Recorded)
+    plots.plot_history(p, "disp", "force", tmp_path / "h.png")
+    marked = [ln for ln in figs[0].axes[0].get_lines() if ln.get_marker() == "o"]
+    assert len(marked) == 1 and marked[0].get_xdata().tolist() == [1.0, 3.0]
+    assert "2 rows accepted above tol 0.0001" in marked[0].get_label()
+    q = tmp_path / "no_tol.h5"
+    with ResultWriter(q, tiny_model(), {}) as w:
+        w.append_history({"increment": 0, "residual": 1.0, "disp": 0.0, "force": 0.0})
+    assert open_result(q).rows_above_tol() == (None, None)
+    plots.plot_history(q, "disp", "force", tmp_path / "h2.png")
+    assert not [ln for ln in figs[1].axes[0].get_lines() if ln.get_marker() == "o"]
+
+
 def test_crack_map(h5, tmp_path):
     assert_picture(plots.crack_map(h5, -1, tmp_path / "c.png", threshold=0.3))
     assert_picture(plots.crack_map(h5, 0, tmp_path / "c2.png", blocks="wall", plane="yz"),

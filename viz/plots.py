@@ -44,7 +44,8 @@ def plot_history(results, x_key, y_key, png, xscale=1e3, yscale=1e-3, label=None
     xscale, yscale : float
         factors applied to the SI values (default m -> mm and N -> kN).
     label : str or list of str, optional
-        legend entries (default: the file names).
+        legend entries (default: the file names). Rows accepted above the run's tolerance (at a
+        residual floor, ``SolverOptions.floor_tol``) are marked with open circles.
     xlabel, ylabel, title : str, optional
         default labels are the keys with the units of the scales.
 
@@ -65,10 +66,14 @@ def plot_history(results, x_key, y_key, png, xscale=1e3, yscale=1e-3, label=None
             if key not in r.history:
                 raise PlotError(f"plot_history: {r.path} has no history column {key!r}; "
                                 f"columns are {list(r.history)}")
+        tol, floor = r.rows_above_tol()
         for key in ys:
             name = lab or os.path.basename(r.path)
-            ax.plot(r.history[x_key] * xscale, r.history[key] * yscale, lw=1.2,
-                    label=f"{name}: {key}" if len(ys) > 1 else name)
+            x, y = r.history[x_key] * xscale, r.history[key] * yscale
+            line, = ax.plot(x, y, lw=1.2, label=f"{name}: {key}" if len(ys) > 1 else name)
+            if floor is not None and floor.size:
+                ax.plot(x[floor], y[floor], "o", ms=4, mfc="none", color=line.get_color(),
+                        label=f"{name}: {floor.size} rows accepted above tol {tol:g}")
     ax.set_xlabel(xlabel or f"{x_key} [{_unit(xscale, 'm')}]")
     ax.set_ylabel(ylabel or f"{', '.join(ys)} [{_unit(yscale, 'N')}]")
     if title:
