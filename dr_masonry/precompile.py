@@ -61,8 +61,11 @@ def callee_signatures(mesh, cont, dyn):
 
 def _cached(name, sig):
     """True if kernel ``name`` is compiled for ``sig`` in this process or in the cache; None if
-    it has no usable cache (nothing a worker compiled could reach this process)."""
+    it has no usable cache (nothing a worker compiled could reach this process) or is not
+    compiled at all (``NUMBA_DISABLE_JIT=1``)."""
     disp = getattr(R, name)
+    if not hasattr(disp, "overloads"):   # a plain Python function
+        return None
     if tuple(sig) in disp.overloads:
         return True
     cache_file = getattr(disp._cache, "_cache_file", None)   # NullCache: caching unavailable

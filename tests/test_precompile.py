@@ -70,6 +70,23 @@ def test_a_failing_worker_is_reported_and_the_run_goes_on(monkeypatch):
         sim.run(gravity())
 
 
+def test_no_worker_without_compilation():
+    """``NUMBA_DISABLE_JIT=1`` (debugging): the kernels are plain functions, nothing to compile."""
+    script = textwrap.dedent(f"""\
+        import sys
+        sys.path.insert(0, {os.path.dirname(__file__)!r})
+        from test_precompile import tiny_wall
+        from dr_masonry import precompile
+        sim = tiny_wall()
+        sim.build()
+        print(precompile.ensure_compiled(sim.mesh, sim.cont, sim.dyn))
+        """)
+    env = dict(os.environ, NUMBA_DISABLE_JIT="1")
+    out = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True,
+                         check=True, timeout=300)
+    assert out.stdout.strip().splitlines()[-1] == "False"
+
+
 @pytest.mark.slow
 def test_cold_start_compiles_the_force_kernel_in_the_worker_only(tmp_path):
     """Empty cache: the run's process compiles ``relax`` and the node passes, never the force
