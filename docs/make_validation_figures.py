@@ -7,7 +7,8 @@ state (the last frame, or the checkpoint of a run stopped after it), the crushin
 compressive damage) at the last state and, for the house, the
 vertical reactions of each wall and pier (paper Fig. 26).
 ``python docs/make_validation_figures.py overlay NAME RESULT.h5=LABEL ...`` draws the response
-curves of runs of one scene on one plot, ``docs/NAME.png``. Commands that made the result files
+curves of runs of one scene on one plot, ``docs/NAME.png`` (and for the house their reactions,
+``docs/NAME_reactions.png``); rows accepted above tol are marked with open circles. Commands that made the result files
 are listed in docs/validation.md.
 """
 import os
@@ -71,10 +72,7 @@ def figures(path):
     h = r.history
     made = [plot_history(r, xk, yk, stem + "_curve.png", yscale=ys, label=scene)]
     if scene == "terraced_house":
-        made.append(plot_history(r, xk, [f"{n}.fz" for n in ("base_P1", "base_P2", "base_W1",
-                                                             "base_W2")],
-                                 stem + "_reactions.png", ylabel="vertical reaction, half model [kN]",
-                                 title="reactions of the piers (P1 wide, P2 narrow) and walls"))
+        made.append(reactions(r, xk, stem + "_reactions.png"))
     peak = int(h["increment"][int(np.argmax(np.abs(h[yk])))])
     end = last_state(r)
     for plane, names, tag in views:
@@ -87,20 +85,34 @@ def figures(path):
     return made
 
 
+def reactions(runs, xk, png, labels=None):
+    """The house's vertical reactions of each pier and transversal wall (paper Fig. 26) against
+    ``xk`` for one run or several (``labels``) on one plot."""
+    return plot_history(runs, xk, [f"{n}.fz" for n in ("base_P1", "base_P2", "base_W1", "base_W2")],
+                        png, label=labels, ylabel="vertical reaction, half model [kN]",
+                        title="reactions of the piers (P1 wide, P2 narrow) and walls")
+
+
 def overlay(name, specs):
-    """Response curves of the runs ``specs`` (``path=label``) on one plot ``docs/name.png``."""
+    """Response curves of the runs ``specs`` (``path=label``) on one plot ``docs/name.png``; for
+    the house also their reactions, ``docs/name_reactions.png``."""
     from dr_masonry.cli import import_case
     paths, labels = zip(*(spec.split("=", 1) for spec in specs))
     scene = scene_of(open_result(paths[0]))
     xk, yk, ys, _ = SCENES[scene]
     curve = import_case(scene).CURVE
-    return plot_history(list(paths), xk, yk, os.path.join(HERE, name + ".png"), yscale=ys,
-                        label=list(labels), xlabel=curve["xlabel"], ylabel=curve["ylabel"])
+    made = [plot_history(list(paths), xk, yk, os.path.join(HERE, name + ".png"), yscale=ys,
+                         label=list(labels), xlabel=curve["xlabel"], ylabel=curve["ylabel"])]
+    if scene == "terraced_house":
+        made.append(reactions(list(paths), xk, os.path.join(HERE, name + "_reactions.png"),
+                              list(labels)))
+    return made
 
 
 if __name__ == "__main__":
     if sys.argv[1:2] == ["overlay"]:
-        print(overlay(sys.argv[2], sys.argv[3:]))
+        for f in overlay(sys.argv[2], sys.argv[3:]):
+            print(f)
     else:
         for p in sys.argv[1:]:
             for f in figures(p):

@@ -176,7 +176,7 @@ def test_plot_history_marks_rows_accepted_above_tol(tmp_path, monkeypatch):
     plots.plot_history(p, "disp", "force", tmp_path / "h.png")
     marked = [ln for ln in figs[0].axes[0].get_lines() if ln.get_marker() == "o"]
     assert len(marked) == 1 and marked[0].get_xdata().tolist() == [1.0, 3.0]
-    assert "2 rows accepted above tol 0.0001" in marked[0].get_label()
+    assert "2 rows accepted above tol 0.0001 (open)" in marked[0].get_label()
     q = tmp_path / "no_tol.h5"
     with ResultWriter(q, tiny_model(), {}) as w:
         w.append_history({"increment": 0, "residual": 1.0, "disp": 0.0, "force": 0.0})

@@ -67,13 +67,14 @@ def plot_history(results, x_key, y_key, png, xscale=1e3, yscale=1e-3, label=None
                 raise PlotError(f"plot_history: {r.path} has no history column {key!r}; "
                                 f"columns are {list(r.history)}")
         tol, floor = r.rows_above_tol()
-        for key in ys:
-            name = lab or os.path.basename(r.path)
+        name = lab or os.path.basename(r.path)
+        for j, key in enumerate(ys):
             x, y = r.history[x_key] * xscale, r.history[key] * yscale
             line, = ax.plot(x, y, lw=1.2, label=f"{name}: {key}" if len(ys) > 1 else name)
-            if floor is not None and floor.size:
+            if floor is not None and floor.size:   # one legend entry per run
                 ax.plot(x[floor], y[floor], "o", ms=4, mfc="none", color=line.get_color(),
-                        label=f"{name}: {floor.size} rows accepted above tol {tol:g}")
+                        label=(f"{name}: {floor.size} rows accepted above tol {tol:g} (open)"
+                               if j == 0 else "_nolegend_"))
     ax.set_xlabel(xlabel or f"{x_key} [{_unit(xscale, 'm')}]")
     ax.set_ylabel(ylabel or f"{', '.join(ys)} [{_unit(yscale, 'N')}]")
     if title:
@@ -81,7 +82,7 @@ def plot_history(results, x_key, y_key, png, xscale=1e3, yscale=1e-3, label=None
     ax.grid(True, lw=0.4, alpha=0.5)
     ax.axhline(0.0, color="k", lw=0.5)
     ax.axvline(0.0, color="k", lw=0.5)
-    ax.legend()
+    ax.legend(fontsize="small" if len(ax.get_legend_handles_labels()[1]) > 4 else None)
     fig.tight_layout()
     fig.savefig(png, dpi=150)
     return png
