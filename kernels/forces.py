@@ -52,6 +52,7 @@ def element_and_contact_forces(X, U, mesh, cont):
 
 
 def _none(*shape, dtype=np.float64):
+    """Zeros of ``shape`` (a field of an empty set: only its Numba type matters)."""
     return np.zeros(shape, dtype=dtype)
 
 
@@ -93,7 +94,7 @@ def hex_forces(U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old, s_new
     active : (na,) int64
         element ids to compute; other elements are untouched.
     dN, geo, wdet, h
-        from :func:`hex_geometry_shared` or :func:`hex_geometry`: element e reads table
+        from :func:`.hex8.hex_geometry_shared` or :func:`.hex8.hex_geometry`: element e reads table
         ``dN[geo[e]]``.
     elem_mat : (ne,) int64
         row of ``params`` for each element.
@@ -105,7 +106,7 @@ def hex_forces(U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old, s_new
         Gauss-point states.
     pristine : (ne,) uint8
         1 where the committed state of every Gauss point is the material's virgin state
-        (:func:`pristine_elements`): while all its points stay surely elastic the element takes
+        (:func:`.hex8.pristine_elements`): while all its points stay surely elastic the element takes
         the elastic path of its material without reading or writing the state (the trial state
         is then the committed one; bit for bit the forces of ``gp_update``).
     dirty : (ne,) uint8
@@ -118,6 +119,7 @@ def hex_forces(U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old, s_new
         stored elastic energy sum_g wdet 0.5 S : (E - E_p), written (E_p = 0 for a
         material with ``p[MP_ELASTIC] == 1``).
     """
+    # (the reference coordinates are read by contact points only: U stands in for them)
     element_and_contact_forces(U, U, hex_set(conn, active, dN, geo, wdet, h, elem_mat, params,
                                              s_old, s_new, pristine, dirty, f_elem, energy),
                                NO_CONTACTS)
