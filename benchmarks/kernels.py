@@ -97,14 +97,14 @@ def hex_args(sim, U, elastic, virgin=True):
 def hex_call(args):
     """(force kernel, its arguments) for ``hex_forces(*args)``: the call that the wrapper
     :func:`dr_masonry.kernels.forces.hex_forces` makes, its packing kept out of the timing."""
-    from dr_masonry.kernels.forces import NO_CONTACTS, element_and_contact_forces, hex_set
-    return element_and_contact_forces, (args[0], args[0], hex_set(*args[1:]), NO_CONTACTS)
+    from dr_masonry.kernels.forces import element_and_contact_forces, hex_only_args
+    return element_and_contact_forces, hex_only_args(*args)
 
 
 def contact_call(args):
     """(force kernel, its arguments) for ``contact_forces(*args)``, as :func:`hex_call`."""
-    from dr_masonry.kernels.forces import NO_ELEMENTS, contact_set, element_and_contact_forces
-    return element_and_contact_forces, (args[0], args[1], NO_ELEMENTS, contact_set(*args[2:]))
+    from dr_masonry.kernels.forces import contact_only_args, element_and_contact_forces
+    return element_and_contact_forces, contact_only_args(*args)
 
 
 def contact_args(sim, U):

@@ -44,8 +44,8 @@ def callee_signatures(mesh, cont, dyn):
         "forces": [("element_and_contact_forces", (dyn.X, dyn.U, mesh, cont)),
                    ("internal_forces", (mesh, cont, dyn))],
         "nodes": [("place_rigid_nodes", (dyn,)),
-                  ("gather_residual", (hbuf, mesh.ptr, mesh.rows, cont, dyn, lam, dyn.fint.copy(),
-                                       flag, parts)),
+                  ("gather_residual", (hbuf, mesh.ptr, mesh.rows, cont, dyn, lam, dyn.fint, flag,
+                                       parts)),   # (relax passes a copy of fint: same type)
                   ("rp_residual", (dyn, lam, rpres)),
                   ("residual", (dyn, lam, rpres)),
                   ("norms", (dyn, lam, rpres)),

@@ -68,17 +68,21 @@ NO_ELEMENTS = Mesh(_none(0, 8, dtype=np.int64), _none(0, dtype=np.int64), _none(
                    _none(0, dtype=np.int64))
 
 
-def hex_set(conn, active, dN, geo, wdet, h, elem_mat, params, s_old, s_new, pristine, dirty,
-            f_elem, energy):
-    """``Mesh`` of these arrays (parameters of :func:`hex_forces`; no node map)."""
-    return Mesh(conn, active, dN, geo, wdet, h, elem_mat, params, s_old, s_new, pristine, dirty,
-                f_elem, energy, NO_CONTACTS.ptr, NO_CONTACTS.rows)
+def hex_only_args(U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old, s_new, pristine,
+                  dirty, f_elem, energy):
+    """Arguments of :func:`element_and_contact_forces` for :func:`hex_forces` (same parameters):
+    (X, U, Mesh of these arrays without a node map, NO_CONTACTS). The reference coordinates are
+    read by contact points only: U stands in for them."""
+    return U, U, Mesh(conn, active, dN, geo, wdet, h, elem_mat, params, s_old, s_new, pristine,
+                      dirty, f_elem, energy, NO_CONTACTS.ptr, NO_CONTACTS.rows), NO_CONTACTS
 
 
-def contact_set(slave, master, xi, area, law, lparams, gap0, s_old, s_new, gaps, trac, fbuf, psi):
-    """``Cont`` of these arrays (parameters of :func:`contact_forces`; no node map)."""
-    return Cont(slave, master, xi, area, law, lparams, gap0, s_old, s_new, gaps, trac, fbuf, psi,
-                NO_CONTACTS.ptr, NO_CONTACTS.rows)
+def contact_only_args(X, U, slave, master, xi, area, law, lparams, gap0, s_old, s_new, gaps, trac,
+                      fbuf, psi):
+    """Arguments of :func:`element_and_contact_forces` for :func:`contact_forces` (same
+    parameters): (X, U, NO_ELEMENTS, Cont of these arrays without a node map)."""
+    return X, U, NO_ELEMENTS, Cont(slave, master, xi, area, law, lparams, gap0, s_old, s_new, gaps,
+                                   trac, fbuf, psi, NO_CONTACTS.ptr, NO_CONTACTS.rows)
 
 
 def hex_forces(U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old, s_new, pristine,
@@ -119,10 +123,8 @@ def hex_forces(U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old, s_new
         stored elastic energy sum_g wdet 0.5 S : (E - E_p), written (E_p = 0 for a
         material with ``p[MP_ELASTIC] == 1``).
     """
-    # (the reference coordinates are read by contact points only: U stands in for them)
-    element_and_contact_forces(U, U, hex_set(conn, active, dN, geo, wdet, h, elem_mat, params,
-                                             s_old, s_new, pristine, dirty, f_elem, energy),
-                               NO_CONTACTS)
+    element_and_contact_forces(*hex_only_args(U, conn, active, dN, geo, wdet, h, elem_mat, params,
+                                              s_old, s_new, pristine, dirty, f_elem, energy))
 
 
 def contact_forces(X, U, slave, master, xi, area, law, lparams, gap0, s_old, s_new, gaps, trac,
@@ -139,6 +141,5 @@ def contact_forces(X, U, slave, master, xi, area, law, lparams, gap0, s_old, s_n
     fbuf : (nc * 5, 3) written: internal force on the slave (row 5c) and masters (5c + 1..4), N.
     psi : (nc,) written: stored energy of each point, J.
     """
-    element_and_contact_forces(X, U, NO_ELEMENTS, contact_set(slave, master, xi, area, law, lparams,
-                                                              gap0, s_old, s_new, gaps, trac,
-                                                              fbuf, psi))
+    element_and_contact_forces(*contact_only_args(X, U, slave, master, xi, area, law, lparams,
+                                                  gap0, s_old, s_new, gaps, trac, fbuf, psi))

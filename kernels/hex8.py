@@ -256,7 +256,6 @@ def hex_add_gauss_force(F, sig, dng, w, fe):
             fe[a, i] += p0 * dng[a, 0] + p1 * dng[a, 1] + p2 * dng[a, 2]
 
 
-
 @ijit
 def hex_chunk(lo, hi, U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old, s_new, pristine,
               dirty, f_elem, energy):

@@ -132,7 +132,6 @@ def place_rigid_nodes(dyn):
                                - (d0 if k == 0 else (d1 if k == 1 else d2)))
 
 
-
 @jit
 def stored_energy(mesh, cont):
     """Stored energy of the last force evaluation (active hexahedra and contact points), J."""
