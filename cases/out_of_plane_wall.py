@@ -38,7 +38,7 @@ from dr_masonry.geometry import plane_nodes
 from dr_masonry.materials.joint import KC_PEN_FACTOR
 from dr_masonry.postprocess import cycle_text, energy_per_cycle
 from dr_masonry.protocols import S6
-from dr_masonry.scene import finish, run_stages, scene_params, solver_summary
+from dr_masonry.scene import RUN_PARAMS, choice, finish, run_stages, scene_params, solver_summary
 from dr_masonry.units import MPa, kN, mm
 
 PARAMS = dict(
@@ -58,16 +58,7 @@ PARAMS = dict(
     kc_factor=KC_PEN_FACTOR,  # compression penalty of the joints / knn (BENCHMARKS.md section 18)
     gravity=True,
     beam_height=0.20,       # steel loading beam height, m
-    tol=1e-4,
-    damping="viscous",
-    coarse=True,            # two-level relaxation (SolverOptions.coarse)
-    max_dissipation=0.0,    # load-step control (SolverOptions.max_dissipation; 0: off)
-    redetect=True,          # finite sliding of the joints (SolverOptions.redetect)
-    max_iter=200_000,       # iteration cap of an increment before it is cut (SolverOptions)
-    max_cuts=4,             # halvings of an increment before the run stops (SolverOptions)
-    floor_tol=0.0,          # accept a stalled increment at this residual (SolverOptions; 0: off)
-    frames=5,               # write a field frame every this many increments
-    resume=False,           # continue the run stored in out.h5 from its last checkpoint
+    **RUN_PARAMS,
     fast=False,             # preset FAST: tiny 0.88 x 0.81 m coarse wall, few increments
     out="results/out_of_plane_wall",
 )
@@ -82,7 +73,7 @@ CURVE = dict(x="centre.uy", y="lambda", stage="push", xscale=1e3, yscale=1e-3,
 def build(params):
     """Model and stages. Sets ``sim.wall``, ``sim.centre`` (node set of the control node) and
     ``sim.loaded_area`` (m^2, area of the pressurised face)."""
-    kind = squat_wall._choice(params, "protocol", ("monotonic", "cyclic"))
+    kind = choice(params, "protocol", ("monotonic", "cyclic"))
     sim, wall, beam, base, pre = squat_wall.rig(params, JointLaw.reference(),
                                                 PlasticDamage.reference())
     model = sim.model

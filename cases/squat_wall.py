@@ -45,8 +45,8 @@ from dr_masonry.materials.joint import KC_PEN_FACTOR
 from dr_masonry.params import ParameterError
 from dr_masonry.postprocess import cycle_text, energy_per_cycle
 from dr_masonry.protocols import S5
-from dr_masonry.scene import (finish, run_stages, scene_params, solver_options, solver_summary,
-                              with_penalty)
+from dr_masonry.scene import (RUN_PARAMS, choice, finish, run_stages, scene_params, solver_options,
+                              solver_summary, with_penalty)
 from dr_masonry.units import MPa, kN, mm
 
 PARAMS = dict(
@@ -69,16 +69,7 @@ PARAMS = dict(
     variant="reference",    # reference | PAR_A | PAR_B | PAR_C | PAR_D | PAR_E
     gravity=True,           # self-weight of wall and beam
     beam_height=0.20,       # steel loading beam height, m
-    tol=1e-4,
-    damping="viscous",
-    coarse=True,            # two-level relaxation (SolverOptions.coarse)
-    max_dissipation=0.0,    # load-step control (SolverOptions.max_dissipation; 0: off)
-    redetect=True,          # finite sliding of the joints (SolverOptions.redetect)
-    max_iter=200_000,       # iteration cap of an increment before it is cut (SolverOptions)
-    max_cuts=4,             # halvings of an increment before the run stops (SolverOptions)
-    floor_tol=0.0,          # accept a stalled increment at this residual (SolverOptions; 0: off)
-    frames=5,               # write a field frame every this many increments
-    resume=False,           # continue the run stored in out.h5 from its last checkpoint
+    **RUN_PARAMS,
     fast=False,             # preset FAST: tiny 0.88 x 0.81 m coarse wall, few increments
     out="results/squat_wall",
 )
@@ -95,12 +86,6 @@ MESHES = {"fine": BrickSpec(), "coarse": BrickSpec(nx_along=1, nz_height=1, ny_t
 #: sensitivity variants (paper Fig. 18): which parameter pairs are doubled
 VARIANTS = {"reference": "", "PAR_A": "A", "PAR_B": "B", "PAR_C": "C", "PAR_D": "D",
             "PAR_E": "ABCD"}
-
-
-def _choice(params, key, options):
-    if params[key] not in options:
-        raise ParameterError(f"parameter {key}={params[key]!r}: valid values are {list(options)}")
-    return params[key]
 
 
 def materials(variant="reference", shear_damage="calibrated"):
@@ -140,7 +125,7 @@ def rig(params, law, block):
     """
     if not params["sigma"] >= 0:
         raise ParameterError(f"parameter sigma={params['sigma']!r}: must be >= 0 Pa (compression)")
-    brick = MESHES[_choice(params, "mesh", tuple(MESHES))]
+    brick = MESHES[choice(params, "mesh", tuple(MESHES))]
     model = Model()
     model.set_joint_law(with_penalty(law, params["kc_factor"]))
     courses = max(1, int(round(params["height"] / brick.height)))
@@ -175,9 +160,9 @@ def build(params, protocol=S5):
     reference point), ``sim.n_top`` (N, vertical force on the wall's top) and ``sim.weight_wall``
     (N, the wall's self-weight, 0 without gravity).
     """
-    bc = _choice(params, "bc", ("cantilever", "double_clamped"))
-    kind = _choice(params, "protocol", ("monotonic", "cyclic"))
-    _choice(params, "shear_damage", ("calibrated", "paper"))
+    bc = choice(params, "bc", ("cantilever", "double_clamped"))
+    kind = choice(params, "protocol", ("monotonic", "cyclic"))
+    choice(params, "shear_damage", ("calibrated", "paper"))
     law, block = materials(params["variant"], params["shear_damage"])
     sim, wall, beam, base, pre = rig(params, law, block)
     held = ("y", "rx", "rz") + (("ry",) if bc == "double_clamped" else ())

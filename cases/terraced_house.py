@@ -46,8 +46,8 @@ from dr_masonry.materials.joint import KC_PEN_FACTOR
 from dr_masonry.params import ParameterError
 from dr_masonry.postprocess import cycle_text, energy_per_cycle
 from dr_masonry.protocols import S7
-from dr_masonry.scene import (finish, run_stages, scene_params, solver_options, solver_summary,
-                              with_penalty)
+from dr_masonry.scene import (RUN_PARAMS, choice, finish, run_stages, scene_params, solver_options,
+                              solver_summary, with_penalty)
 from dr_masonry.units import kN, mm
 
 PARAMS = dict(
@@ -63,16 +63,7 @@ PARAMS = dict(
     mesh="coarse",          # coarse (1 x 1 x 1 hexahedra per brick) | fine (4 x 1 x 2)
     slab_element=0.22,      # slab and foundation hexahedron size in plan, m
     kc_factor=KC_PEN_FACTOR,  # compression penalty of the joints / knn (BENCHMARKS.md section 18)
-    tol=1e-4,
-    damping="viscous",
-    coarse=True,            # two-level relaxation (SolverOptions.coarse)
-    max_dissipation=0.0,    # load-step control (SolverOptions.max_dissipation; 0: off)
-    redetect=True,          # finite sliding of the joints (SolverOptions.redetect)
-    max_iter=200_000,       # iteration cap of an increment before it is cut (SolverOptions)
-    max_cuts=4,             # halvings of an increment before the run stops (SolverOptions)
-    floor_tol=0.0,          # accept a stalled increment at this residual (SolverOptions; 0: off)
-    frames=5,               # write a field frame every this many increments
-    resume=False,           # continue the run stored in out.h5 from its last checkpoint
+    **RUN_PARAMS,
     fast=False,             # preset FAST: small coarse house of large blocks, few increments
     out="results/terraced_house",
 )
@@ -104,11 +95,8 @@ def house_params(params):
 def build(params):
     """Model and stages. Sets ``sim.groups`` (the generator's block groups), ``sim.floors`` (the
     slab reference points, bottom first) and ``sim.house`` (the HouseParams)."""
-    if params["direction"] not in (1, -1):
-        raise ParameterError(f"parameter direction={params['direction']!r}: must be 1 or -1")
-    if params["protocol"] not in ("monotonic", "cyclic"):
-        raise ParameterError(f"parameter protocol={params['protocol']!r}: valid values are "
-                             f"['monotonic', 'cyclic']")
+    choice(params, "direction", (1, -1))
+    choice(params, "protocol", ("monotonic", "cyclic"))
     hp = house_params(params)
     lay = hp.layout()
     model = Model()

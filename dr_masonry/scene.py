@@ -18,11 +18,33 @@ def scene_params(defaults, fast, argv, doc):
     return params
 
 
+#: the solver and output parameters of the wall and house scenes, with their defaults (a scene's
+#: ``PARAMS`` spreads them: ``dict(..., **RUN_PARAMS)``)
+RUN_PARAMS = dict(
+    tol=1e-4,               # relative residual tolerance of an increment (SolverOptions)
+    damping="viscous",      # viscous | kinetic | local | fire (SolverOptions.damping)
+    coarse=True,            # two-level relaxation (SolverOptions.coarse)
+    max_dissipation=0.0,    # load-step control (SolverOptions.max_dissipation; 0: off)
+    redetect=True,          # finite sliding of the joints (SolverOptions.redetect)
+    max_iter=200_000,       # iteration cap of an increment before it is cut (SolverOptions)
+    max_cuts=4,             # halvings of an increment before the run stops (SolverOptions)
+    floor_tol=0.0,          # accept a stalled increment at this residual (SolverOptions; 0: off)
+    frames=5,               # write a field frame every this many increments
+    resume=False,           # continue the run stored in out.h5 from its last checkpoint
+)
 #: scene parameters that are :class:`SolverOptions` fields of the same name
 OPTION_KEYS = ("tol", "damping", "coarse", "max_dissipation", "redetect", "max_iter", "max_cuts",
                "floor_tol")
 #: parameters that may differ when a run is continued: how it is solved and written, not what
 SOLVER_KEYS = {"resume", "progress", "out", "h5", "frames", "solver", *OPTION_KEYS}
+
+
+def choice(params, key, options):
+    """``params[key]``, checked to be one of ``options`` (a ParameterError names the valid ones)."""
+    from .params import ParameterError
+    if params[key] not in options:
+        raise ParameterError(f"parameter {key}={params[key]!r}: valid values are {list(options)}")
+    return params[key]
 
 
 def solver_options(params):
