@@ -25,7 +25,8 @@ by a gentle softening, since the edges keep the cracked panel in two-way action.
 
 Run: ``python cases/out_of_plane_wall.py [key=value ...]`` (or ``dr-masonry run
 out_of_plane_wall``); ``mesh=coarse`` is one hexahedron per brick; ``fast=true`` runs a
-0.88 x 0.81 m wall in a few increments (test suite).
+0.88 x 0.81 m wall in a few increments (test suite). The full protocols' commands and measured
+run times (hours): README, "Full protocols".
 """
 import sys
 

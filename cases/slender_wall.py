@@ -14,8 +14,9 @@ the base and, double clamped, also at the top; peak base shear close to the rock
 rocking loops at small drifts and toe crushing at large ones.
 
 Run: ``python cases/slender_wall.py [key=value ...]`` (or ``dr-masonry run slender_wall``); the
-coarse monotonic run takes a few minutes on 2 cores. ``fast=true`` runs a 0.88 x 0.81 m coarse
-wall in a few increments (test suite).
+coarse monotonic run takes about 10 minutes (one thread, 2026-11-30). ``fast=true`` runs a
+0.88 x 0.81 m coarse wall in a few increments (test suite). The full protocols' commands and
+measured run times: README, "Full protocols".
 """
 from dr_masonry.cases import squat_wall
 from dr_masonry.protocols import S4

@@ -31,7 +31,8 @@ increment, 255 s of relaxation; section 27);
 and is a long validation run.
 The energy balance error of these coarse increments reaches a few per cent (trapezoidal rule of
 the external work over large steps; it shrinks with the step, see tests/test_walls.py).
-``fast=true`` runs a 0.88 x 0.81 m coarse wall in a few increments (test suite).
+``fast=true`` runs a 0.88 x 0.81 m coarse wall in a few increments (test suite). The full
+protocols' commands and measured run times: README, "Full protocols".
 """
 import sys
 

@@ -31,7 +31,8 @@ a 2-core laptop.
 
 Run: ``python cases/terraced_house.py [key=value ...]`` (or ``dr-masonry run terraced_house``).
 ``mesh=coarse`` (default: one hexahedron per brick) or ``mesh=fine`` (4 x 1 x 2 per brick);
-``fast=true`` runs a small coarse house of large blocks in a few increments (test suite).
+``fast=true`` runs a small coarse house of large blocks in a few increments (test suite). The
+full protocols' commands and measured run times (hours): README, "Full protocols".
 """
 import sys
 from dataclasses import replace
