@@ -44,7 +44,6 @@ from dr_masonry import (Combined, Displacement, Indirect, JointLaw, Load, Model,
 from dr_masonry.geometry import BrickSpec, HouseParams, terraced_house
 from dr_masonry.loading import Gravity
 from dr_masonry.materials.joint import KC_PEN_FACTOR
-from dr_masonry.params import ParameterError
 from dr_masonry.postprocess import cycle_text, energy_per_cycle
 from dr_masonry.protocols import S7
 from dr_masonry.scene import (RUN_PARAMS, choice, finish, run_stages, scene_params, solver_options,
@@ -84,12 +83,9 @@ REACTIONS = {"base_P1": "pier_wide", "base_P2": "pier_narrow", "base_W1": "trans
 
 def house_params(params):
     """The :class:`HouseParams` of a mesh choice (``tiny``: the scaled smoke-test house)."""
-    mesh = params["mesh"]
+    mesh = choice(params, "mesh", (*MESHES, "tiny"))
     if mesh == "tiny":
         return replace(HouseParams().scaled(coarse=True), slab_element=params["slab_element"])
-    if mesh not in MESHES:
-        raise ParameterError(f"parameter mesh={mesh!r}: valid values are "
-                             f"{list(MESHES) + ['tiny']}")
     return HouseParams(brick=MESHES[mesh], slab_element=params["slab_element"])
 
 

@@ -4,7 +4,7 @@ import os
 
 import numpy as np
 
-from .params import parse_overrides
+from .params import ParameterError, parse_overrides
 
 
 def scene_params(defaults, fast, argv, doc):
@@ -41,7 +41,6 @@ SOLVER_KEYS = {"resume", "progress", "out", "h5", "frames", "solver", *OPTION_KE
 
 def choice(params, key, options):
     """``params[key]``, checked to be one of ``options`` (a ParameterError names the valid ones)."""
-    from .params import ParameterError
     if params[key] not in options:
         raise ParameterError(f"parameter {key}={params[key]!r}: valid values are {list(options)}")
     return params[key]
@@ -58,7 +57,6 @@ def solver_options(params):
 def with_penalty(law, factor):
     """``law`` (JointLaw) with the compression penalty ``factor`` x knn: the scene parameter
     ``kc_factor`` (default ``KC_PEN_FACTOR``; its effect: BENCHMARKS.md section 18)."""
-    from .params import ParameterError
     if not (isinstance(factor, (int, float)) and np.isfinite(factor) and factor > 0):
         raise ParameterError(f"parameter kc_factor={factor!r}: must be a positive multiple of knn")
     return law.with_changes(kc_pen=factor * law.knn)
@@ -70,7 +68,6 @@ def run_stages(sim, stages, params):
     :data:`SOLVER_KEYS`). A Ctrl-C (KeyboardInterrupt) goes on up with a note saying where the
     rows so far are and how to continue (``dr-masonry`` prints just that note)."""
     if params.get("resume"):
-        from .params import ParameterError
         from .results import open_result
         path = params["h5"]
         if not os.path.exists(path):
