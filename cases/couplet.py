@@ -14,6 +14,7 @@ import sys
 import numpy as np
 
 from dr_masonry import Displacement, JointLaw, Model, PlasticDamage, Simulation, Stage
+from dr_masonry.cli import run_script
 from dr_masonry.params import parse_overrides
 from dr_masonry.scene import finish, solver_options
 from dr_masonry.units import MPa, mm
@@ -84,4 +85,4 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(run_script(main))

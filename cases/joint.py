@@ -23,6 +23,7 @@ import sys
 
 import numpy as np
 
+from dr_masonry.cli import run_script
 from dr_masonry.drivers_joint import drive_joint
 from dr_masonry.materials.joint import JointLaw
 from dr_masonry.units import MPa, mm
@@ -190,4 +191,4 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_script(main))

@@ -35,6 +35,7 @@ import numpy as np
 from dr_masonry import (Combined, Displacement, Indirect, JointLaw, PlasticDamage, Pressure,
                         Stage)
 from dr_masonry.cases import squat_wall
+from dr_masonry.cli import run_script
 from dr_masonry.geometry import plane_nodes
 from dr_masonry.materials.joint import KC_PEN_FACTOR
 from dr_masonry.postprocess import cycle_text, energy_per_cycle
@@ -141,4 +142,4 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(run_script(main))

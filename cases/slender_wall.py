@@ -18,7 +18,10 @@ coarse monotonic run takes about 10 minutes (one thread, 2026-11-30). ``fast=tru
 0.88 x 0.81 m coarse wall in a few increments (test suite). The full protocols' commands and
 measured run times: README, "Full protocols".
 """
+import sys
+
 from dr_masonry.cases import squat_wall
+from dr_masonry.cli import run_script
 from dr_masonry.protocols import S4
 from dr_masonry.units import MPa, mm
 
@@ -43,4 +46,4 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(run_script(main))

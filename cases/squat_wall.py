@@ -40,6 +40,7 @@ import numpy as np
 
 from dr_masonry import (Displacement, Force, JointLaw, Load, Model, PlasticDamage, Simulation,
                         Stage)
+from dr_masonry.cli import run_script
 from dr_masonry.geometry import BrickSpec, add_beam, add_foundation, add_wall, plane_nodes
 from dr_masonry.loading import Gravity
 from dr_masonry.materials.joint import KC_PEN_FACTOR
@@ -213,4 +214,4 @@ def main(argv=None, doc=__doc__, defaults=PARAMS, protocol=S5, title="S5 squat w
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(run_script(main))

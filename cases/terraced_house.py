@@ -41,6 +41,7 @@ import numpy as np
 
 from dr_masonry import (Combined, Displacement, Indirect, JointLaw, Load, Model, PlasticDamage,
                         PointLoad, Simulation, Stage)
+from dr_masonry.cli import run_script
 from dr_masonry.geometry import BrickSpec, HouseParams, terraced_house
 from dr_masonry.loading import Gravity
 from dr_masonry.materials.joint import KC_PEN_FACTOR
@@ -169,4 +170,4 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(run_script(main))

@@ -16,6 +16,7 @@ import numpy as np
 
 from dr_masonry import (Displacement, Force, JointLaw, Model, PlasticDamage, Simulation,
                         Stage)
+from dr_masonry.cli import run_script
 from dr_masonry.geometry import plane_nodes
 from dr_masonry.params import parse_overrides
 from dr_masonry.scene import finish, solver_options
@@ -84,4 +85,4 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(run_script(main))

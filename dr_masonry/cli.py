@@ -13,11 +13,13 @@ from __future__ import annotations
 import argparse
 import importlib
 import json
+import os
 import pkgutil
 import sys
 
 import numpy as np
 
+from .interrupts import Terminated
 from .params import ParameterError
 
 
@@ -44,8 +46,7 @@ def _cmd_run(args):
     mod = import_case(name)
     if not hasattr(mod, "main"):
         raise ParameterError(f"case {name!r} has no main(argv)")
-    rc = mod.main(list(args.overrides))
-    return rc if isinstance(rc, int) else 0
+    return mod.main(list(args.overrides))
 
 
 def _key_value(opt, spec):
@@ -211,18 +212,32 @@ def _parser():
 
 
 def main(argv=None):
-    """Entry point of ``dr-masonry``; returns the exit status (2 on bad input, 130 after
-    Ctrl-C)."""
+    """Entry point of ``dr-masonry``; returns the exit status (see :func:`guarded`)."""
     args = _parser().parse_args(argv)
+    return guarded(f"dr-masonry {args.command}", args.func, args)
+
+
+def run_script(main):
+    """``main()`` of a case script run as ``python cases/NAME.py key=value ...``, guarded as
+    ``dr-masonry run NAME`` is (the script's ``__main__`` block: ``sys.exit(run_script(main))``)."""
+    return guarded(os.path.basename(sys.argv[0]), main)
+
+
+def guarded(command, func, *args):
+    """``func(*args)`` as the command ``command``; returns the exit status: the function's int
+    result (0 otherwise), 2 on bad input (the message, no traceback), 130 after Ctrl-C and 143
+    after SIGTERM (where the results are, no traceback)."""
     try:
-        return args.func(args)
-    except KeyboardInterrupt as e:   # Ctrl-C: where the results are, not a traceback
-        print("\n".join([f"dr-masonry {args.command}: interrupted"]
+        rc = func(*args)
+        return rc if isinstance(rc, int) else 0
+    except KeyboardInterrupt as e:   # Ctrl-C, SIGTERM: where the results are, not a traceback
+        term = isinstance(e, Terminated)
+        print("\n".join([f"{command}: " + ("terminated (SIGTERM)" if term else "interrupted")]
                         + getattr(e, "__notes__", [])), file=sys.stderr)
-        return 130
+        return 143 if term else 130
     except ValueError as e:
         if type(e) is ValueError:  # not one of the project's input errors: keep the traceback
             raise
         # ParameterError, ResultsError, ModelError, ...: the message says what is wrong
-        print(f"dr-masonry {args.command}: error: {e}", file=sys.stderr)
+        print(f"{command}: error: {e}", file=sys.stderr)
         return 2

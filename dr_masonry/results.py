@@ -2,7 +2,9 @@
 
 The schema is documented in ``docs/file_format.md``; :data:`SCHEMA_VERSION` is stored in the file
 and checked on reading. Every write is followed by a flush, so a run that is killed leaves a file
-that opens and holds every row and frame written before the kill. The file is written with the
+that opens and holds every row and frame written before the kill; a Ctrl-C or SIGTERM waits
+until the write under way is complete (:func:`dr_masonry.interrupts.uninterrupted`), and a new
+checkpoint replaces the old one only once it is complete. The file is written with the
 HDF5 1.8 format (``libver=("v108", "v108")``): the 1.10+ format marks a file "open for write" in its
 superblock and refuses to open it after a crash without ``h5clear``.
 
@@ -18,6 +20,8 @@ from importlib import metadata
 
 import h5py
 import numpy as np
+
+from .interrupts import uninterrupted
 
 #: version of the layout described in docs/file_format.md; bump on any incompatible change
 SCHEMA_VERSION = 1
@@ -53,6 +57,8 @@ CONTACT_ARRAYS = {
 
 #: frame "position" of the last checkpoint (:meth:`Result.frame`)
 CHECKPOINT = "checkpoint"
+#: the next checkpoint while it is written; it replaces ``/checkpoint`` once complete
+CHECKPOINT_NEW = "checkpoint_new"
 
 
 class ResultsError(ValueError):
@@ -115,6 +121,9 @@ class ResultWriter:
         elif mode == "a":
             check_file(self.path)
             self._f = h5py.File(self.path, "a", libver=LIBVER)
+            if (CHECKPOINT not in self._f and CHECKPOINT_NEW in self._f
+                    and self._f[CHECKPOINT_NEW].attrs.get("complete", False)):
+                self._f.move(CHECKPOINT_NEW, CHECKPOINT)   # killed between removal and rename
             self._sizes = json.loads(self._f["model"].attrs["sizes"])
             if model is not None:
                 got = _model_sizes(model)
@@ -156,6 +165,7 @@ class ResultWriter:
         f.create_group("frames")
 
     # ------------------------------------------------------------------ writing
+    @uninterrupted()
     def append_history(self, row):
         """Append one row ``{key: float}`` to ``/history`` (keys fixed by the first row; a
         restart (mode ``"a"``) may add columns, NaN in the rows before it)."""
@@ -208,6 +218,7 @@ class ResultWriter:
         """Increments of the frames written, ascending."""
         return sorted(int(k) for k in self._f["frames"])
 
+    @uninterrupted()
     def write_frame(self, increment, fields, attrs=None, contacts=None):
         """Write the frame of load increment ``increment`` (int >= 0).
 
@@ -248,6 +259,7 @@ class ResultWriter:
                 d.attrs["units"] = STANDARD_FIELDS[k][2]
         self.flush()
 
+    @uninterrupted()
     def truncate(self, increment, rows):
         """Drop the frames after ``increment`` and the history rows after the first ``rows``.
 
@@ -267,20 +279,26 @@ class ResultWriter:
             h[k].resize((rows,))
         self.flush()
 
+    @uninterrupted()
     def write_checkpoint(self, increment, arrays, meta):
         """Replace ``/checkpoint`` by the solver state after ``increment`` (restart data).
 
         ``arrays``: name -> ndarray (any shape); ``meta``: JSON-serialisable dict.
         """
         f = self._f
-        if "checkpoint" in f:
-            del f["checkpoint"]
-        g = f.create_group("checkpoint")
+        if CHECKPOINT_NEW in f:   # left by a process killed while writing it
+            del f[CHECKPOINT_NEW]
+        g = f.create_group(CHECKPOINT_NEW)
         g.attrs["increment"] = int(increment)
         g.attrs["history_rows"] = self.n_history
         g.attrs["meta"] = _json(meta)
         for name, arr in arrays.items():
             g.create_dataset(name, data=np.asarray(arr))
+        g.attrs["complete"] = True
+        self.flush()
+        if CHECKPOINT in f:
+            del f[CHECKPOINT]
+        f.move(CHECKPOINT_NEW, CHECKPOINT)
         self.flush()
 
     def flush(self):
@@ -449,10 +467,13 @@ class Result:
         return f["frames"][_frame_name(inc)]
 
     def _checkpoint_group(self, f):
-        """The open file's ``/checkpoint`` group; ResultsError if there is none."""
-        if "checkpoint" not in f:
-            raise ResultsError(f"{self.path} has no checkpoint (written with every frame)")
-        return f["checkpoint"]
+        """The open file's ``/checkpoint`` group (or a complete ``/checkpoint_new``: a process
+        killed between removing the old one and renaming the new one); ResultsError if none."""
+        if CHECKPOINT in f:
+            return f[CHECKPOINT]
+        if CHECKPOINT_NEW in f and f[CHECKPOINT_NEW].attrs.get("complete", False):
+            return f[CHECKPOINT_NEW]
+        raise ResultsError(f"{self.path} has no checkpoint (written with every frame)")
 
     def checkpoint(self):
         """(increment, arrays dict, meta dict) of the last checkpoint; ResultsError if none."""

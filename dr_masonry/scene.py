@@ -65,8 +65,9 @@ def with_penalty(law, factor):
 def run_stages(sim, stages, params):
     """``sim.run(stages)``; with ``params["resume"]``, continue ``params["h5"]`` from its last
     checkpoint instead (the stored run's parameters must equal ``params`` apart from
-    :data:`SOLVER_KEYS`). A Ctrl-C (KeyboardInterrupt) goes on up with a note saying where the
-    rows so far are and how to continue (``dr-masonry`` prints just that note)."""
+    :data:`SOLVER_KEYS`). A Ctrl-C or SIGTERM (KeyboardInterrupt,
+    :class:`~dr_masonry.interrupts.Terminated`) goes on up with a note saying where the rows so
+    far are and how to continue (``dr-masonry`` and the case scripts print just that note)."""
     if params.get("resume"):
         from .results import open_result
         path = params["h5"]

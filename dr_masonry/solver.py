@@ -23,6 +23,7 @@ from .kernels.forces import Cont, Mesh
 from .kernels.hex8 import hex_geometry_shared, lumped_mass, pristine_elements, stiffness_rowsum
 from .kernels.joint_law import JS_D, JS_DISS, JS_DISSF
 from .kernels.plastic_damage import MP_HMAX, MS_DC, MS_DISS, MS_DT
+from .interrupts import terminate_as_interrupt
 from .precompile import ensure_compiled
 
 #: energies of an increment at its current state (:meth:`Simulation._energies`)
@@ -587,7 +588,9 @@ class Simulation:
 
     # ------------------------------------------------------------------ running
     def run(self, stages):
-        """Run the stages; returns the history (dict of arrays). Raises SolverError on failure.
+        """Run the stages; returns the history (dict of arrays). Raises SolverError on failure,
+        KeyboardInterrupt on Ctrl-C and :class:`~dr_masonry.interrupts.Terminated` (one) on SIGTERM,
+        with the results file complete up to the last row written.
 
         After :meth:`resume`, ``stages`` must be the original run's stages: those finished before
         the checkpoint are skipped and the stage in progress continues where it stopped.
@@ -609,8 +612,10 @@ class Simulation:
         total = sum(s.increments for s in stages[k0:]) - i0
         self._bar = tqdm(total=total, disable=not self.options.progress, unit="incr") if tqdm else None
         try:
-            for k, stage in enumerate(stages[k0:], start=k0):
-                self._run_stage(stage, (k, len(stages)), *((i0, starts) if k == k0 else (0, None)))
+            with terminate_as_interrupt():   # SIGTERM stops the run as Ctrl-C does
+                for k, stage in enumerate(stages[k0:], start=k0):
+                    self._run_stage(stage, (k, len(stages)),
+                                    *((i0, starts) if k == k0 else (0, None)))
         finally:
             if self._bar is not None:
                 self._bar.close()

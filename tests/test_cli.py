@@ -197,3 +197,16 @@ def test_interrupted_scene_says_where_its_rows_are(capsys, monkeypatch):
     assert main(["run", "squat_wall"]) == 130
     err = capsys.readouterr().err
     assert "interrupted" in err and "resume=true" in err and "Traceback" not in err
+
+
+def test_case_script_bad_input_is_a_message(tmp_path):
+    """``python cases/NAME.py`` guards its input as ``dr-masonry run NAME`` does: exit status 2
+    and the message naming the parameter, no traceback."""
+    script = os.path.join(os.path.dirname(__file__), os.pardir, "cases", "slender_wall.py")
+    env = dict(os.environ)
+    env.pop("OMP_WAIT_POLICY", None)
+    proc = subprocess.run([sys.executable, script, "heigth=3"], capture_output=True, text=True,
+                          env=env, timeout=300, cwd=tmp_path)
+    assert proc.returncode == 2
+    assert proc.stderr.startswith("slender_wall.py: error: unknown parameter 'heigth'")
+    assert "Traceback" not in proc.stderr

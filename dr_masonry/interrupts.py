@@ -1,0 +1,79 @@
+"""Stopping a run from outside without losing what it wrote.
+
+Ctrl-C (SIGINT) raises :class:`KeyboardInterrupt` in Python; a batch scheduler's or ``kill``'s
+stop (SIGTERM) would end the process at once. During a run, :func:`terminate_as_interrupt` turns
+SIGTERM into :class:`Terminated` (a KeyboardInterrupt), so both take the same path: the run
+stops between two compiled calls, its file keeps every row, frame and the last checkpoint, and
+the scenes say how to continue. :func:`uninterrupted` holds either signal back while a write to
+the results file is under way (a checkpoint half replaced could not be resumed) and raises it
+when the write is complete.
+
+Handlers can only be set in the main thread: elsewhere (a Dask worker's thread) both context
+managers do nothing, and the process's owner decides what its signals do. A signal the process
+ignores (SIGINT of a job started in the background) stays ignored.
+"""
+from __future__ import annotations
+
+import signal
+import threading
+from contextlib import contextmanager
+
+
+class Terminated(KeyboardInterrupt):
+    """A run stopped by SIGTERM (``kill``, a scheduler's time limit or pre-emption)."""
+
+
+def _raise_terminated(signum, frame):
+    raise Terminated("SIGTERM")
+
+
+def _in_main_thread():
+    return threading.current_thread() is threading.main_thread()
+
+
+@contextmanager
+def terminate_as_interrupt():
+    """Within the block, SIGTERM raises :class:`Terminated` (unless another handler than the
+    default one is set: the process's owner handles it then)."""
+    if not _in_main_thread() or signal.getsignal(signal.SIGTERM) is not signal.SIG_DFL:
+        yield
+        return
+    signal.signal(signal.SIGTERM, _raise_terminated)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
+_depth = 0
+
+
+@contextmanager
+def uninterrupted():
+    """Within the block, SIGINT and SIGTERM whose handlers raise in Python are recorded, not
+    raised; at its end the first one recorded is raised by its own handler. Nests (only the
+    outermost block defers)."""
+    global _depth
+    if _depth or not _in_main_thread():
+        _depth += 1
+        try:
+            yield
+        finally:
+            _depth -= 1
+        return
+    pending = []
+    saved = {}
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        handler = signal.getsignal(sig)
+        if callable(handler):
+            saved[sig] = handler
+            signal.signal(sig, lambda signum, frame: pending.append(signum))
+    _depth = 1
+    try:
+        yield
+    finally:
+        _depth = 0
+        for sig, handler in saved.items():
+            signal.signal(sig, handler)
+    if pending:
+        saved[pending[0]](pending[0], None)
