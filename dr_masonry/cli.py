@@ -225,8 +225,9 @@ def run_script(main):
 
 def guarded(command, func, *args):
     """``func(*args)`` as the command ``command``; returns the exit status: the function's int
-    result (0 otherwise), 2 on bad input (the message, no traceback), 130 after Ctrl-C and 143
-    after SIGTERM (where the results are, no traceback)."""
+    result (0 otherwise), 1 when a run stops on a :class:`~dr_masonry.solver.SolverError` and 2
+    on bad input (the message, no traceback), 130 after Ctrl-C and 143 after SIGTERM (where the
+    results are, no traceback)."""
     try:
         rc = func(*args)
         return rc if isinstance(rc, int) else 0
@@ -241,3 +242,11 @@ def guarded(command, func, *args):
         # ParameterError, ResultsError, ModelError, ...: the message says what is wrong
         print(f"{command}: error: {e}", file=sys.stderr)
         return 2
+    except RuntimeError as e:
+        from .solver import SolverError   # not at the top: `info` and `list` need no Numba
+        if not isinstance(e, SolverError):
+            raise
+        # a run that did not converge or became unstable: its diagnosis and where its rows are
+        print("\n".join([f"{command}: stopped: {e}"] + getattr(e, "__notes__", [])),
+              file=sys.stderr)
+        return 1

@@ -5,6 +5,7 @@ import os
 import numpy as np
 
 from .params import ParameterError, parse_overrides
+from .solver import SolverError
 
 
 def scene_params(defaults, fast, argv, doc):
@@ -67,7 +68,8 @@ def run_stages(sim, stages, params):
     checkpoint instead (the stored run's parameters must equal ``params`` apart from
     :data:`SOLVER_KEYS`). A Ctrl-C or SIGTERM (KeyboardInterrupt,
     :class:`~dr_masonry.interrupts.Terminated`) goes on up with a note saying where the rows so
-    far are and how to continue (``dr-masonry`` and the case scripts print just that note)."""
+    far are and how to continue (``dr-masonry`` and the case scripts print just that note); a
+    :class:`~dr_masonry.solver.SolverError` gets a note naming the file of the rows so far."""
     if params.get("resume"):
         from .results import open_result
         path = params["h5"]
@@ -88,6 +90,10 @@ def run_stages(sim, stages, params):
         e.add_note(f"interrupted in row {sim.increment + 1}" + (
             f": the rows so far are in {h5}; add resume=true to the same command to continue"
             if h5 else ""))
+        raise
+    except SolverError as e:
+        if params.get("h5"):
+            e.add_note(f"{sim.increment} rows written to {params['h5']}")
         raise
 
 

@@ -16,6 +16,7 @@ import numba
 import numpy as np
 
 from . import loading as L
+from .interrupts import terminate_as_interrupt
 from .kernels import relaxation as R
 from .kernels.assembly import node_row_map
 from .kernels.contact_forces import contact_rowsum
@@ -23,7 +24,6 @@ from .kernels.forces import Cont, Mesh
 from .kernels.hex8 import hex_geometry_shared, lumped_mass, pristine_elements, stiffness_rowsum
 from .kernels.joint_law import JS_D, JS_DISS, JS_DISSF
 from .kernels.plastic_damage import MP_HMAX, MS_DC, MS_DISS, MS_DT
-from .interrupts import terminate_as_interrupt
 from .precompile import ensure_compiled
 
 #: energies of an increment at its current state (:meth:`Simulation._energies`)

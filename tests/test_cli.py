@@ -210,3 +210,14 @@ def test_case_script_bad_input_is_a_message(tmp_path):
     assert proc.returncode == 2
     assert proc.stderr.startswith("slender_wall.py: error: unknown parameter 'heigth'")
     assert "Traceback" not in proc.stderr
+
+
+def test_a_run_that_stops_gives_its_diagnosis(tmp_path, capsys):
+    """A scene whose increment does not converge: exit status 1, the solver's diagnosis and the
+    file of the rows so far, no traceback."""
+    out = tmp_path / "s4"
+    rc = main(["run", "slender_wall", "fast=true", f"out={out}", "max_iter=5", "max_cuts=0"])
+    err = capsys.readouterr().err
+    assert rc == 1
+    assert "dr-masonry run: stopped: increment 1 of stage" in err and "did not converge" in err
+    assert f"0 rows written to {out}.h5" in err and "Traceback" not in err
