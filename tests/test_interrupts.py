@@ -142,7 +142,9 @@ def test_sigterm_stops_a_scene_and_resume_finishes_it(tmp_path):
     r = open_result(h5)
     n = r.n_history
     assert 6 <= n < 22
-    assert r.checkpoint()[0] == n   # frames=1: the checkpoint is the last row's
+    # frames=1: the checkpoint is the last row's, or the one before when the signal came
+    # between a row and its frame (resume then computes that row again)
+    assert r.checkpoint()[0] in (n - 1, n)
     assert np.array_equal(r.history["increment"], np.arange(1, n + 1))
     done = subprocess.run(cmd + ["resume=true"], capture_output=True, text=True, env=env,
                           timeout=300)
