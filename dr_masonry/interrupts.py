@@ -45,21 +45,13 @@ def terminate_as_interrupt():
         signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
-_depth = 0
-
-
 @contextmanager
 def uninterrupted():
     """Within the block, SIGINT and SIGTERM whose handlers raise in Python are recorded, not
-    raised; at its end the first one recorded is raised by its own handler. Nests (only the
-    outermost block defers)."""
-    global _depth
-    if _depth or not _in_main_thread():
-        _depth += 1
-        try:
-            yield
-        finally:
-            _depth -= 1
+    raised; at its end the first one recorded is raised by its own handler. Nests: an inner
+    block's recorded signal goes to the outer block's record."""
+    if not _in_main_thread():
+        yield
         return
     pending = []
     saved = {}
@@ -68,11 +60,9 @@ def uninterrupted():
         if callable(handler):
             saved[sig] = handler
             signal.signal(sig, lambda signum, frame: pending.append(signum))
-    _depth = 1
     try:
         yield
     finally:
-        _depth = 0
         for sig, handler in saved.items():
             signal.signal(sig, handler)
     if pending:

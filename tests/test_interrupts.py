@@ -150,3 +150,13 @@ def test_sigterm_stops_a_scene_and_resume_finishes_it(tmp_path):
                           timeout=300)
     assert done.returncode == 0, done.stderr
     assert np.array_equal(open_result(h5).history["increment"], np.arange(1, 23))
+
+
+def test_nested_uninterrupted_blocks_raise_at_the_outer_end():
+    done = []
+    with pytest.raises(KeyboardInterrupt):
+        with uninterrupted():
+            with uninterrupted():
+                _signal_self(signal.SIGINT)
+            done.append(1)   # the inner block's end hands the signal on, it does not raise
+    assert done == [1] and signal.getsignal(signal.SIGINT) is signal.default_int_handler
