@@ -345,7 +345,7 @@ def _locate(model, F, fid, p, x, slack):
     return quads, np.column_stack([np.clip(r, -1.0, 1.0), np.clip(s, -1.0, 1.0)]), outside
 
 
-def _gaps(x, slave, master, xi):
+def local_gaps(x, slave, master, xi):
     """Local gaps (nc, 3) [u, d1, d2] (m) from ``kernels.contact_frame.local_gap``."""
     g = np.empty((slave.shape[0], 3))
     xs = x[slave]
@@ -471,7 +471,7 @@ def detect_contacts(model, tol=None, angle_tol=ANGLE_TOL):
     order = np.lexsort((bl[:, 1], slave))
     cs = ContactSet(slave[order], master[order], xi[order], area[order],
                     _laws(model, bl[order, 0], bl[order, 1]), bl[order], np.zeros((slave.size, 3)))
-    cs.gap0 = _gaps(x, cs.slave, cs.master, cs.xi)
+    cs.gap0 = local_gaps(x, cs.slave, cs.master, cs.xi)
     model.contacts = cs
     return cs
 
@@ -525,11 +525,7 @@ def redetect(model, contacts, x_current, slack=SLIDE_SLACK, reach=None, rows=Non
         return contacts, src
     bs = contacts.blocks[moved, 0]
     if reach is None:
-        c = model.block_corners
-        edge = np.stack([np.linalg.norm(c[:, 1] - c[:, 0], axis=1),
-                         np.linalg.norm(c[:, 3] - c[:, 0], axis=1),
-                         np.linalg.norm(c[:, 4] - c[:, 0], axis=1)], axis=1)
-        reach = 0.5 * (edge / model.block_divisions).max(axis=1)[bs]
+        reach = 0.5 * element_edge(model)[bs]
     reach = np.broadcast_to(np.asarray(reach, dtype=np.float64), moved.shape)
     if not np.all(np.isfinite(reach) & (reach > 0)):
         raise ModelError(f"redetect: reach must be positive lengths (m), got {reach}")
@@ -555,11 +551,11 @@ def redetect(model, contacts, x_current, slack=SLIDE_SLACK, reach=None, rows=Non
     if row.size:
         k = moved[row]
         quads, xi, _ = _locate(model, F, fid, xs[k], x, slack)
-        g_old = _gaps(x, contacts.slave[k], contacts.master[k], contacts.xi[k]) - contacts.gap0[k]
+        g_old = local_gaps(x, contacts.slave[k], contacts.master[k], contacts.xi[k]) - contacts.gap0[k]
         new.master[k], new.xi[k] = quads, xi
         new.blocks[k, 1] = F["block"][fid]
         new.law[k] = _laws(model, new.blocks[k, 0], new.blocks[k, 1])
-        new.gap0[k] = _gaps(x, new.slave[k], quads, xi) - g_old
+        new.gap0[k] = local_gaps(x, new.slave[k], quads, xi) - g_old
     # points no face took: keep while their old master face is within reach, else drop
     lost = np.setdiff1d(np.arange(moved.size), row)
     drop = np.zeros(nc, bool)
@@ -571,6 +567,15 @@ def redetect(model, contacts, x_current, slack=SLIDE_SLACK, reach=None, rows=Non
         drop[k] = outside > reach[lost]
     keep = np.flatnonzero(~drop)
     return new.subset(keep), src[keep]
+
+
+def element_edge(model):
+    """Largest element edge (n_blocks,) m of every block, as built."""
+    c = model.block_corners
+    edge = np.stack([np.linalg.norm(c[:, 1] - c[:, 0], axis=1),
+                     np.linalg.norm(c[:, 3] - c[:, 0], axis=1),
+                     np.linalg.norm(c[:, 4] - c[:, 0], axis=1)], axis=1)
+    return (edge / model.block_divisions).max(axis=1)
 
 
 def _near_faces(F, p, reach):

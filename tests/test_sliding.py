@@ -1,12 +1,14 @@
 """Finite sliding of the joints (dr_masonry/sliding.py): a block pushed along two foundation blocks
-and off their end, checked against rigid-block statics (friction plateau, reactions), the
-geometry of the re-paired points, the energy balance and a restart across a re-pairing."""
+and off their end (and back), checked against rigid-block statics (friction plateau, reactions,
+friction work), the geometry of the re-paired points, the energy balance and a restart across a
+re-pairing."""
 import numpy as np
 import pytest
 
 from dr_masonry import BodyForce, Gravity, Indirect, JointLaw, Load, Model, PlasticDamage
 from dr_masonry import Simulation, SolverOptions, Stage
-from dr_masonry.contact_search import project_bilinear
+from dr_masonry.contact_search import local_gaps, project_bilinear
+from dr_masonry.kernels.joint_law import JS_D, JS_DP1, JS_DP2, JS_G1
 from dr_masonry.sliding import SWITCH
 from dr_masonry.results import open_result
 
@@ -30,13 +32,14 @@ def build(output=None, redetect=True):
     return sim, rp, blk
 
 
-def stages(rp, blk, path):
-    push = Indirect(pattern=BodyForce(accel=(9.81, 0.0, 0.0), blocks=[blk]), target=rp, dof="x",
-                    path=path, name="push")
+def stages(rp, blk, path, pattern=None):
+    pattern = pattern or BodyForce(accel=(9.81, 0.0, 0.0), blocks=[blk])
+    push = Indirect(pattern=pattern, target=rp, dof="x", path=path, name="push")
     return [Stage("gravity", 1, [Load(pattern=Gravity(), to=1.0)]), Stage("push", len(path), [push])]
 
 
 PATH = np.linspace(0.016, 0.16, 10)   # the block ends on [0.26, 0.46]: 60 mm beyond B
+WEIGHT = 2000.0 * 9.81 * 0.2 * 0.1 * 0.1
 
 
 def test_block_slides_across_faces_and_off_the_end():
@@ -46,11 +49,10 @@ def test_block_slides_across_faces_and_off_the_end():
     with pytest.warns(RuntimeWarning, match="slid"):   # nodes beyond B's end, before they drop
         hist = sim.run(stages(rp, blk, PATH))
     c = sim.cont
-    weight = 2000.0 * 9.81 * 0.2 * 0.1 * 0.1
     # rigid-block statics: the friction plateau and the base reactions, through every re-pairing
     np.testing.assert_allclose(hist["lambda"][1:], MU, rtol=1e-3)
-    np.testing.assert_allclose(hist["base.fz"], weight, rtol=1e-6)
-    np.testing.assert_allclose(hist["base.fx"][1:], -MU * weight, rtol=1e-3)
+    np.testing.assert_allclose(hist["base.fz"], WEIGHT, rtol=1e-6)
+    np.testing.assert_allclose(hist["base.fx"][1:], -MU * WEIGHT, rtol=1e-3)
     assert np.all(np.abs(hist["balance_error"]) < 0.02)
     assert hist["contacts_moved"][1:].sum() > 0
     x = m.nodes + sim.dyn.U
@@ -70,6 +72,83 @@ def test_block_slides_across_faces_and_off_the_end():
     assert np.all(sim.sliding.blocks[on, 1][xs[on] > 0.2 + 1e-9] == 1)
     # the model keeps the set as detected (reference pairing), the run its own
     np.testing.assert_array_equal(m.contacts.master, master0)
+
+
+def test_points_taken_back_after_sliding_off_come_back_as_fresh_contacts():
+    """Out to 60 mm beyond B's end (two points off) and back: the points a face takes back
+    carry nothing from their time off into the friction. To make that state as bad as it gets
+    (as on the S4 double-clamped cyclic run), the off points' nodes are put 2 mm below the plane
+    of the quad they left (their gap offset) with a slider stuck 50 mm behind: the friction of
+    every increment back is still the rigid block's, mu W |du|, and the balance holds."""
+    sim, rp, blk = build()
+    pattern = BodyForce(accel=(9.81, 0.0, 0.0), blocks=[blk])
+    with pytest.warns(RuntimeWarning, match="slid"):
+        out = sim.run(stages(rp, blk, PATH, pattern))
+    c = sim.cont
+    off = np.flatnonzero(c.area == 0.0)
+    assert off.size == 2
+    c.gap0[off, 0] += 0.002
+    c.s_old[off, JS_DP1] -= 0.05 * np.sign(c.s_old[off, JS_G1])
+    c.s_new[off] = c.s_old[off]
+    back = np.linspace(0.144, 0.016, 9)
+    push = Indirect(pattern=pattern, target=rp, dof="x", path=back, name="back")
+    hist = sim.run([Stage("back", back.size, [push])])
+    assert hist["contacts_off"][out["increment"].size] == 0      # taken back in the first row
+    np.testing.assert_allclose(hist["lambda"][-back.size:], -MU, rtol=1e-3)
+    # the first row back reverses the slip within one step (the midpoint rule's known limit);
+    # every one after it dissipates the rigid block's friction work
+    dw = np.diff(hist["D_joint_friction"][-back.size:])
+    du = np.abs(np.diff(hist["top.ux"][-back.size:]))
+    np.testing.assert_allclose(dw, MU * WEIGHT * du, rtol=2e-3)
+    assert np.all(np.abs(hist["balance_error"]) < 0.01)
+    # seated as fresh dry contacts when taken back (at the end of the first row back): plastic
+    # slip measured from there
+    np.testing.assert_allclose(c.s_old[off, JS_D], 1.0)
+    np.testing.assert_allclose(np.linalg.norm(c.s_old[off, JS_DP1:JS_DP2 + 1], axis=1),
+                               back[0] - back[-1], rtol=1e-3)
+
+
+def test_a_face_does_not_take_back_a_node_behind_it():
+    """After the push, the block is moved back 20 mm by hand (the two nodes off the end come
+    within reach of B's face again) with those nodes sagging 2 mm below the face's plane (a
+    crushed corner hanging over the edge): their points stay off, as the penalty would throw
+    the nodes out. Lifted to the plane, they are taken back, seated on the face."""
+    sim, rp, blk = build()
+    with pytest.warns(RuntimeWarning, match="slid"):
+        sim.run(stages(rp, blk, PATH))
+    c, m = sim.cont, sim.model
+    off = np.flatnonzero(c.area == 0.0)
+    nodes = m.block_nodes(blk)
+    sim.dyn.U[nodes, 0] -= 0.02
+    sim.dyn.U[c.slave[off], 2] -= 0.002
+    sim.sliding.update()
+    assert np.all(c.area[off] == 0.0)
+    sim.dyn.U[c.slave[off], 2] += 0.002
+    sim.sliding.update()
+    np.testing.assert_allclose(c.area[off], sim.sliding.area0[off])
+    np.testing.assert_allclose(c.s_old[off, JS_D], 1.0)
+    np.testing.assert_allclose(c.s_old[off, JS_DP1:JS_DP2 + 1], 0.0)
+    x = m.nodes + sim.dyn.U
+    g = local_gaps(x, c.slave[off], c.master[off], c.xi[off]) - c.gap0[off]
+    np.testing.assert_allclose(g[:, 1:], 0.0, atol=1e-12)        # seated: no slip,
+    np.testing.assert_allclose(g[:, 0], 0.0, atol=1e-8)          # at its contact pressure
+
+
+def test_an_increment_that_moves_the_energy_balance_names_its_points():
+    """A joint state corrupted by hand (the slider of one point 50 mm behind its slip) books
+    friction from nowhere in the next increment: the warning names that point."""
+    sim, rp, blk = build()
+    pattern = BodyForce(accel=(9.81, 0.0, 0.0), blocks=[blk])
+    with pytest.warns(RuntimeWarning, match="slid"):
+        sim.run(stages(rp, blk, PATH[:3], pattern))
+    c = sim.cont
+    k = 3
+    c.s_old[k, JS_DP1] -= 0.05 * np.sign(c.s_old[k, JS_G1])
+    push = Indirect(pattern=pattern, target=rp, dof="x", path=PATH[3:4], name="push")
+    with pytest.warns(RuntimeWarning, match=rf"moved by .* J .* in this one increment; it "
+                      rf"dissipated most at joint points: point {k} \(node {c.slave[k]}, "
+                      rf"blocks 2-\d\)"):
+        sim.run([Stage("more", 1, [push])])
 
 
 def test_small_sliding_keeps_the_reference_pairing():
