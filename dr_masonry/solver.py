@@ -58,6 +58,8 @@ OVERHANG_WARN = 0.05
 #: load-step control: a half step that dissipates this fraction of its whole step's dissipation
 #: or more holds a jump (smooth softening gives about one half) and is not cut again
 JUMP = 0.75
+#: most warnings per run (per process) that name where an increment moved the energy balance
+BALANCE_JUMPS = 3
 
 
 @contextmanager
@@ -133,7 +135,9 @@ class SolverOptions:
     energy_tol : energy-balance error above which a warning is recorded; the error is
         W_ext - E_stored - D_blocks - D_joints relative to the gross external work
         (sum over DOFs of |f du|, which equals W_ext on monotonic paths and stays meaningful
-        when works of opposite sign cancel, as gravity and the push of a rocking block do)
+        when works of opposite sign cancel, as gravity and the push of a rocking block do).
+        An increment that alone moves the error by more than this names the joint points and
+        the element that dissipated most in it (a few such warnings per run)
     predictor : start each increment from the previous one's displacement increment (same direction)
     coarse : two-level relaxation: a Galerkin coarse correction on the blocks' affine motions
         (:mod:`dr_masonry.coarse`) before every span of ``coarse_every`` iterations; True, False
@@ -252,6 +256,7 @@ class Simulation:
         # [[key, value]], stages of the run call, increments of the stage); stored in checkpoints
         self.stage_position = None
         self._warned = set()
+        self._balance = None   # [error (J) after the last increment, balance jumps reported]
         self.history = {}
         self.increment = 0
         # iterations and relaxation seconds of attempts cut in two since the last committed row
@@ -933,6 +938,9 @@ class Simulation:
         self.energy["W_gross"] = self.energy.get("W_gross", 0.0) + float(np.abs(dw).sum())
         self.f_prev = f_tot
         self._u_committed = d.U.copy()
+        # this increment's dissipation by joint point (J) and element (J), for _audit
+        step_diss = ((cont.s_new[:, JS_DISS] - cont.s_old[:, JS_DISS]) * cont.area,
+                     ((mesh.s_new[:, :, MS_DISS] - mesh.s_old[:, :, MS_DISS]) * mesh.wdet).sum(axis=1))
         mesh.s_old[:] = mesh.s_new
         cont.s_old[:] = cont.s_new
         self._mark_pristine()
@@ -976,7 +984,7 @@ class Simulation:
         self._cut_work = [0, 0.0]
         for key, v in row.items():
             self.history.setdefault(key, [np.nan] * (self.increment - 1)).append(float(v))
-        self._audit(row)
+        self._audit(row, err, *step_diss)
         self.last_residual = info[R.I_RESID]
         self.last_iters = int(info[R.I_ITERS])
         self.last_row = row
@@ -1010,21 +1018,48 @@ class Simulation:
                           f"forces near the block ends are approximate from here on", RuntimeWarning)
         return float(ov.max())
 
-    def _audit(self, row):
-        """Say once per run when the energy balance leaves its bound.
+    def _audit(self, row, err, joint_diss, element_diss):
+        """Say once per run when the energy balance leaves its bound, and (at most
+        ``BALANCE_JUMPS`` times) which joint points and element dissipated most in an increment
+        that alone moved the error by more than the bound: ``err`` J the balance error after
+        it, ``joint_diss`` (nc,) and ``element_diss`` (n_elements,) J its dissipation.
 
         The energy removed by the damping (history column ``E_damped``) is not part of the
         balance: each increment is applied as a step, and relaxing it to rest removes about
         half of (load step x displacement step), whatever the increment; it is reported only.
         """
+        tol = self.options.energy_tol
+        gross = self.energy["W_gross"]
+        if self._balance is None:   # the first increment of this process (a run or a resume)
+            self._balance = [err, 0]
+        jump = err - self._balance[0]
+        self._balance[0] = err
+        if gross > 0 and abs(jump) > tol * gross and self._balance[1] < BALANCE_JUMPS:
+            self._balance[1] += 1
+            c, blocks = self.cont, self.model.element_block
+            pts = "; ".join(f"point {k} (node {c.slave[k]}, blocks {self._pair(k)}) "
+                            f"{joint_diss[k]:.3g} J" for k in np.argsort(joint_diss)[::-1][:3]
+                            if joint_diss[k] != 0.0)
+            e = int(np.argmax(element_diss)) if element_diss.size else -1
+            where = (f"joint points: {pts or 'none'}; element: "
+                     + (f"{e} (block {blocks[e]}) {element_diss[e]:.3g} J"
+                        if e >= 0 and element_diss[e] > 0.0 else "none"))
+            warnings.warn(f"increment {self.increment}: the energy balance moved by {jump:.3g} J "
+                          f"({jump / gross:.1%} of the gross work) in this one increment; it "
+                          f"dissipated most at {where}", RuntimeWarning)
         err = abs(row["balance_error"])
-        if err > self.options.energy_tol and "balance" not in self._warned:
+        if err > tol and "balance" not in self._warned:
             self._warned.add("balance")
             warnings.warn(f"increment {self.increment}: energy balance error {err:.2%} exceeds "
-                          f"{self.options.energy_tol:.2%}; use smaller increments (the trapezoidal "
+                          f"{tol:.2%}; use smaller increments (the trapezoidal "
                           f"work rule misses O(step^2) where joints open or close within an "
                           f"increment: docs/file_format.md) or tighten SolverOptions.tol",
                           RuntimeWarning)
+
+    def _pair(self, k):
+        """'slave-master' blocks of contact point ``k``, as paired now."""
+        b = self.sliding.blocks[k] if self.sliding is not None else self.model.contacts.blocks[k]
+        return f"{b[0]}-{b[1]}"
 
     def fields(self):
         """Current field values for a frame: U, dt, dc per element, D/opening/slip per contact."""
