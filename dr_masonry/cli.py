@@ -105,6 +105,9 @@ def _cmd_info(args):
                                                "its fields)" if not ids or ck > ids[-1] else ""))
     except ResultsError:
         print("checkpoint: none")
+    kept = r.kept_checkpoints
+    if kept:
+        print(f"kept checkpoints: increments {', '.join(map(str, kept))} (resume_from=INCREMENT)")
     if r.n_history:
         print("last row:  " + ", ".join(f"{k}={v[-1]:.6g}" for k, v in r.history.items()))
         unknown = [k for k in args.peak if k not in r.history]
@@ -131,9 +134,11 @@ def _flat(d, prefix=""):
 
 def _changed(config, later):
     """{key: (value at creation, value at a restart)} for the keys a restart's configuration sets
-    to another value (``resume`` left out; ``solver.X`` left out where ``X`` says the same)."""
+    to another value (``resume``, ``resume_from`` left out; ``solver.X`` left out where ``X``
+    says the same)."""
     a, b = _flat(config), _flat(later)
-    diff = {k: (a.get(k), v) for k, v in b.items() if k != "resume" and a.get(k) != v}
+    diff = {k: (a.get(k), v) for k, v in b.items()
+            if k not in ("resume", "resume_from") and a.get(k) != v}
 
     def echoed(k, new):   # solver.X set to the value X is set to
         top = k.removeprefix("solver.")

@@ -59,6 +59,8 @@ CONTACT_ARRAYS = {
 CHECKPOINT = "checkpoint"
 #: the next checkpoint while it is written; it replaces ``/checkpoint`` once complete
 CHECKPOINT_NEW = "checkpoint_new"
+#: copies of earlier checkpoints kept for a restart further back, ``/checkpoints/NNNNNN``
+KEPT = "checkpoints"
 
 
 class ResultsError(ValueError):
@@ -280,10 +282,11 @@ class ResultWriter:
         self.flush()
 
     @uninterrupted()
-    def write_checkpoint(self, increment, arrays, meta):
+    def write_checkpoint(self, increment, arrays, meta, keep=False):
         """Replace ``/checkpoint`` by the solver state after ``increment`` (restart data).
 
-        ``arrays``: name -> ndarray (any shape); ``meta``: JSON-serialisable dict.
+        ``arrays``: name -> ndarray (any shape); ``meta``: JSON-serialisable dict; ``keep``: also
+        keep a copy as ``/checkpoints/NNNNNN`` (a restart from there: :meth:`rewind`).
         """
         f = self._f
         if CHECKPOINT_NEW in f:   # left by a process killed while writing it
@@ -295,6 +298,33 @@ class ResultWriter:
         for name, arr in arrays.items():
             g.create_dataset(name, data=np.asarray(arr))
         g.attrs["complete"] = True
+        self.flush()
+        if CHECKPOINT in f:
+            del f[CHECKPOINT]
+        f.move(CHECKPOINT_NEW, CHECKPOINT)
+        if keep:
+            name = f"{KEPT}/{_frame_name(increment)}"
+            if name in f:
+                del f[name]
+            f.copy(f[CHECKPOINT], name)
+        self.flush()
+
+    @uninterrupted()
+    def rewind(self, increment):
+        """Make the kept checkpoint of ``increment`` the file's checkpoint and drop the kept ones
+        after it (a restart from there: :meth:`Simulation.resume` with ``increment``; the rows
+        and frames after it go with :meth:`truncate`)."""
+        f = self._f
+        kept = sorted(int(k) for k in f[KEPT]) if KEPT in f else []
+        if increment not in kept:
+            raise ResultsError(f"{self.path} keeps no checkpoint of increment {increment}; it "
+                               f"keeps {kept or 'none'} (and the last one, /checkpoint)")
+        for k in kept:
+            if k > increment:
+                del f[f"{KEPT}/{_frame_name(k)}"]
+        if CHECKPOINT_NEW in f:
+            del f[CHECKPOINT_NEW]
+        f.copy(f[f"{KEPT}/{_frame_name(increment)}"], CHECKPOINT_NEW)
         self.flush()
         if CHECKPOINT in f:
             del f[CHECKPOINT]
@@ -447,6 +477,12 @@ class Result:
     @property
     def n_frames(self):
         return len(self.frame_ids)
+
+    @property
+    def kept_checkpoints(self):
+        """Increments of the checkpoints kept for a restart further back (``/checkpoints``)."""
+        with h5py.File(self.path, "r") as f:
+            return sorted(int(k) for k in f[KEPT]) if KEPT in f else []
 
     @property
     def n_history(self):

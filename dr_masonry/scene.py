@@ -32,12 +32,13 @@ RUN_PARAMS = dict(
     floor_tol=0.0,          # accept a stalled increment at this residual (SolverOptions; 0: off)
     frames=5,               # write a field frame every this many increments
     resume=False,           # continue the run stored in out.h5 from its last checkpoint
+    resume_from=0,          # with resume: from the checkpoint kept after this increment instead
 )
 #: scene parameters that are :class:`SolverOptions` fields of the same name
 OPTION_KEYS = ("tol", "damping", "coarse", "max_dissipation", "redetect", "max_iter", "max_cuts",
                "floor_tol")
 #: parameters that may differ when a run is continued: how it is solved and written, not what
-SOLVER_KEYS = {"resume", "progress", "out", "h5", "frames", "solver", *OPTION_KEYS}
+SOLVER_KEYS = {"resume", "resume_from", "progress", "out", "h5", "frames", "solver", *OPTION_KEYS}
 
 
 def choice(params, key, options):
@@ -65,7 +66,8 @@ def with_penalty(law, factor):
 
 def run_stages(sim, stages, params):
     """``sim.run(stages)``; with ``params["resume"]``, continue ``params["h5"]`` from its last
-    checkpoint instead (the stored run's parameters must equal ``params`` apart from
+    checkpoint instead, or from the one kept after increment ``params["resume_from"]`` (when
+    not 0; ``dr-masonry info`` lists them); the stored run's parameters must equal ``params`` apart from
     :data:`SOLVER_KEYS`). A Ctrl-C or SIGTERM (KeyboardInterrupt,
     :class:`~dr_masonry.interrupts.Terminated`) goes on up with a note saying where the rows so
     far are and how to continue (``dr-masonry`` and the case scripts print just that note); a
@@ -82,7 +84,7 @@ def run_stages(sim, stages, params):
             raise ParameterError(f"parameter resume=true: {path} was run with "
                                  + ", ".join(f"{k}={stored[k]!r}" for k in changed)
                                  + "; continue it with the same parameters")
-        sim.resume(path)
+        sim.resume(path, params.get("resume_from") or None)
     try:
         return sim.run(stages)
     except KeyboardInterrupt as e:

@@ -148,6 +148,10 @@ class SolverOptions:
         time have passed since the last time (0: after every increment, and after each committed
         part of a cut increment), so that an interrupted long run loses at most about this much
         work
+    keep_checkpoint_s : keep a copy of the restart data (``/checkpoints/NNNNNN``) at most once
+        per this many seconds of wall time (0: never), so that a long run can be continued from
+        further back (``Simulation.resume(path, increment)``), e.g. with other solver settings
+        or after a fix; a copy costs about a frame's size and twice
     redetect : finite sliding of the joints: after every increment, contact points whose slave
         node slid off its master quad are paired with the quad now under it, and points that slid
         off every face carry no force until one takes them back (:mod:`dr_masonry.sliding`;
@@ -171,6 +175,7 @@ class SolverOptions:
     coarse: object = "auto"
     coarse_every: int = 200
     checkpoint_s: float = 60.0
+    keep_checkpoint_s: float = 3600.0
     redetect: bool = True
     progress: bool = False
 
@@ -198,8 +203,10 @@ class SolverOptions:
                              f"{self.max_dissipation}")
         if not isinstance(self.redetect, (bool, np.bool_)):
             raise ValueError(f"SolverOptions.redetect must be True or False, got {self.redetect!r}")
-        if not (np.isfinite(self.checkpoint_s) and self.checkpoint_s >= 0):
-            raise ValueError(f"SolverOptions.checkpoint_s must be >= 0 s, got {self.checkpoint_s}")
+        for name in ("checkpoint_s", "keep_checkpoint_s"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v >= 0):
+                raise ValueError(f"SolverOptions.{name} must be >= 0 s, got {v}")
         if (self.max_iter < 1 or self.check_every < 1 or self.max_cuts < 0
                 or self.coarse_every < 1 or self.stall_iter < 0):
             raise ValueError("SolverOptions: max_iter, check_every and coarse_every must be >= 1, "
@@ -252,6 +259,8 @@ class Simulation:
         self._resuming = False
         self._checkpoint_stage = None
         self._checkpoint_time = time.perf_counter()
+        self._kept_time = self._checkpoint_time   # when a checkpoint was last kept
+        self._resume_increment = None
         # after each increment: (stage, its increments done, the controls' start values as
         # [[key, value]], stages of the run call, increments of the stage); stored in checkpoints
         self.stage_position = None
@@ -1108,10 +1117,16 @@ class Simulation:
             arrays[f"pattern_P/{name}"] = P
             arrays[f"pattern_rpP/{name}"] = rpP
             meta["patterns"].append(name)
-        self.writer.write_checkpoint(self.increment, arrays, meta)
+        keep = (self.options.keep_checkpoint_s > 0
+                and self._checkpoint_time - self._kept_time >= self.options.keep_checkpoint_s)
+        if keep:
+            self._kept_time = self._checkpoint_time
+        self.writer.write_checkpoint(self.increment, arrays, meta, keep=keep)
 
-    def resume(self, path):
-        """Continue the run stored in ``path`` from its last checkpoint (the last frame).
+    def resume(self, path, increment=None):
+        """Continue the run stored in ``path`` from its last checkpoint (the last frame), or
+        from the checkpoint it kept after ``increment`` (``Result.kept_checkpoints``; the kept
+        ones after it are dropped with the rows and frames).
 
         The simulation must be set up as the original one (same model, supports and reference
         points, e.g. from the scene's ``build``); later rows and frames of the file are dropped and
@@ -1122,12 +1137,21 @@ class Simulation:
         """
         if self._built:
             raise L.LoadingError("resume() must be called before the first run")
+        if increment is not None:
+            from .results import ResultsError, open_result
+            kept = open_result(path).kept_checkpoints
+            if increment not in kept:
+                raise ResultsError(f"{path} keeps no checkpoint of increment {increment}; it "
+                                   f"keeps {kept or 'none'} (and the last one)")
         self.output = path
         self._resuming = True
+        self._resume_increment = increment
         self.build()
 
     def _load_checkpoint(self):
         from .results import open_result
+        if self._resume_increment is not None:
+            self.writer.rewind(int(self._resume_increment))
         inc, arrays, meta = open_result(self.output).checkpoint()
         d = self.dyn
         for k in self._STATE:

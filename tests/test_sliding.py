@@ -10,13 +10,13 @@ from dr_masonry import Simulation, SolverOptions, Stage
 from dr_masonry.contact_search import local_gaps, project_bilinear
 from dr_masonry.kernels.joint_law import JS_D, JS_DP1, JS_DP2, JS_G1
 from dr_masonry.sliding import SWITCH
-from dr_masonry.results import open_result
+from dr_masonry.results import ResultsError, open_result
 
 MU = 0.3
 MAT = PlasticDamage.elastic(10e9, 0.2, 2000.0)
 
 
-def build(output=None, redetect=True):
+def build(output=None, redetect=True, **options):
     """Foundation blocks A = [0, 0.2] and B = [0.2, 0.4] m (fixed, two quads each along x) under a
     0.2 x 0.1 x 0.1 m block on [0.1, 0.3], across their joint (four elements along x: its base is
     the slave side)."""
@@ -25,7 +25,7 @@ def build(output=None, redetect=True):
     a = m.add_box((0.0, 0.0, -0.1), (0.2, 0.1, 0.1), MAT, (2, 1, 1), fixed=True)
     b = m.add_box((0.2, 0.0, -0.1), (0.2, 0.1, 0.1), MAT, (2, 1, 1), fixed=True)
     blk = m.add_box((0.1, 0.0, 0.0), (0.2, 0.1, 0.1), MAT, (4, 1, 1))
-    sim = Simulation(m, SolverOptions(tol=1e-6, redetect=redetect), output=output)
+    sim = Simulation(m, SolverOptions(tol=1e-6, redetect=redetect, **options), output=output)
     nodes = m.block_nodes(blk)
     rp = sim.rigid_point("top", nodes=nodes[np.isclose(m.nodes[nodes, 2], 0.1)])
     sim.contact_reaction("base", [blk], [a, b])
@@ -192,3 +192,36 @@ def test_restart_across_a_repairing(tmp_path):
     export_vtk(path, str(tmp_path / "vtk"))
     assert (tmp_path / "vtk" / "contacts.pvd").exists()
     assert len(list((tmp_path / "vtk").glob("contacts_*.vtu"))) == len(r.frame_ids)
+
+
+def test_resume_from_a_kept_checkpoint(tmp_path, capsys):
+    """A run that keeps every checkpoint, continued from the one kept after increment 6 (before
+    its block slid off the end), ends as an uninterrupted one; the kept checkpoints after 6 go
+    with its rows, and asking for one it does not keep names those it keeps, file untouched."""
+    sim, rp, blk = build()
+    with pytest.warns(RuntimeWarning):
+        whole = sim.run(stages(rp, blk, PATH))
+    path = str(tmp_path / "keep.h5")
+    sim1, rp1, _ = build(output=path, checkpoint_s=0.0, keep_checkpoint_s=1e-9)
+    with pytest.warns(RuntimeWarning):
+        sim1.run(stages(rp1, blk, PATH))
+    sim1.close()
+    assert open_result(path).kept_checkpoints == list(range(1, 12))
+    restarts = len(open_result(path).attrs["restarts"])
+    with pytest.raises(ResultsError, match=r"no checkpoint of increment 99; it keeps \[1, 2"):
+        build()[0].resume(path, 99)
+    assert len(open_result(path).attrs["restarts"]) == restarts
+    sim2, rp2, _ = build()
+    sim2.resume(path, 6)
+    with pytest.warns(RuntimeWarning):
+        hist = sim2.run(stages(rp2, blk, PATH))
+    sim2.close()
+    for key in ("lambda", "top.ux", "base.fz", "D_joints", "contacts_moved", "contacts_off"):
+        np.testing.assert_allclose(hist[key], whole[key], rtol=1e-9, atol=1e-12, err_msg=key)
+    r = open_result(path)
+    assert r.kept_checkpoints == list(range(1, 7))
+    assert r.n_history == whole["increment"].size
+    from dr_masonry.cli import main
+    assert main(["info", path]) == 0
+    assert "kept checkpoints: increments 1, 2, 3, 4, 5, 6 (resume_from=INCREMENT)" in \
+        capsys.readouterr().out
