@@ -151,7 +151,7 @@ class SolverOptions:
     keep_checkpoint_s : keep a copy of the restart data (``/checkpoints/NNNNNN``) at most once
         per this many seconds of wall time (0: never), so that a long run can be continued from
         further back (``Simulation.resume(path, increment)``), e.g. with other solver settings
-        or after a fix; a copy costs about a frame's size and twice
+        or after a fix; each copy is as large as the checkpoint (S4 wall 1.6 MB, house 12 MB)
     redetect : finite sliding of the joints: after every increment, contact points whose slave
         node slid off its master quad are paired with the quad now under it, and points that slid
         off every face carry no force until one takes them back (:mod:`dr_masonry.sliding`;
