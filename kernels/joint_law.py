@@ -16,11 +16,12 @@ sigma > 0 tension.
 * Free energy ``psi = 0.5 (1-D) knn <u>^2 + 0.5 kc_pen <-u>^2 + 0.5 (1-D) kss |d|^2
   + 0.5 D kss |d - dp|^2``; dissipation rate ``Y dD + D tau_f . d(dp)`` with
   ``Y = -dpsi/dD``, integrated by a midpoint-type rule between the committed and the new state
-  (Y from products of the old and new elastic gaps, ``D_mid tau_f_mid . (dp_new - dp_old)``). This matches
-  the trapezoidal work of the tractions: exactly for sliding at constant D, to second order in the
-  step otherwise. A single step much larger than the stick range ``2 mu<-sigma>/kss`` that
-  reverses the slip or enters contact while sliding can give a negative increment; resolved
-  paths dissipate >= 0.
+  (Y from products of the old and new gaps, the slider's part corrected as in the code;
+  ``D_mid tau_f_mid . (dp_new - dp_old)``). This matches the trapezoidal work of the tractions
+  exactly in every step that does not cross u = 0 (there the trapezoid misses the kink between
+  kc_pen and knn, O(step^2)). A single step much larger than the stick range
+  ``2 mu<-sigma>/kss`` that reverses the slip or enters contact while sliding can give a
+  negative increment; resolved paths dissipate >= 0.
 
 Modes (``p[P_MODE]``): ``MODE_COHESIVE``; ``MODE_DRY`` (ft = c = 0: D = 1 always, penalty plus
 Coulomb friction, no damage dissipation); ``MODE_TIED`` (elastic and unbreakable: sigma = knn u
@@ -185,8 +186,16 @@ def joint_point(p, u, d1, d2, s_old, s_new, t):
     # after the peak (where the mean-square form overestimates the dissipation)
     uo = max(s_old[JS_GU], 0.0)
     un = max(u, 0.0)
-    y = 0.5 * knn * uo * un + 0.5 * kss * (g1o * d1 + g2o * d2 - (g1o - dp1o) * (d1 - dp1)
-                                          - (g2o - dp2o) * (d2 - dp2))
+    # the slider's part: e_old . e_new less half (change of e) . (change of dp), e = d - dp its
+    # elastic slip, makes its dissipation its trapezoidal work less its change of free energy in
+    # any step; the product alone over-dissipates 0.25 kss dD |d(dp)|^2 where the slider lets go
+    # in the step that damages (a joint opening from compression while slipped)
+    e1o = g1o - dp1o
+    e2o = g2o - dp2o
+    e1n = d1 - dp1
+    e2n = d2 - dp2
+    xs = e1o * e1n + e2o * e2n - 0.5 * ((e1n - e1o) * (dp1 - dp1o) + (e2n - e2o) * (dp2 - dp2o))
+    y = 0.5 * knn * uo * un + 0.5 * kss * (g1o * d1 + g2o * d2 - xs)
     tfm1 = 0.5 * (kss * (g1o - dp1o) + tf1)
     tfm2 = 0.5 * (kss * (g2o - dp2o) + tf2)
     friction = 0.5 * (d_old + dam) * (tfm1 * (dp1 - dp1o) + tfm2 * (dp2 - dp2o))

@@ -82,12 +82,15 @@ def step(law, old, gap):
     tf = trial if size <= cap else (trial[0] * cap / size, trial[1] * cap / size)
     dp = (d1 - tf[0] / law.kss, d2 - tf[1] / law.kss)
     tau = tuple((1 - D) * law.kss * d + D * f for d, f in zip((d1, d2), tf))
-    # dissipation: Y from products of the old and new (elastic) gaps
+    # dissipation: Y from products of the old and new gaps; the slider's elastic slip e = d - dp
+    # enters as e_old . e_new - 0.5 (e_new - e_old) . (dp_new - dp_old) (MODEL.md's free energy,
+    # trapezoidal work: the step's balance is then exact off u = 0)
     go = old["gap"]
+    eo = [g - q for g, q in zip(go[1:], old["dp"])]
+    en = [d1 - dp[0], d2 - dp[1]]
+    xs = sum(a * b - 0.5 * (b - a) * (q1 - q0) for a, b, q1, q0 in zip(eo, en, dp, old["dp"]))
     Y = (0.5 * law.knn * max(go[0], 0.0) * max(u, 0.0)
-         + 0.5 * law.kss * (go[1] * d1 + go[2] * d2
-                            - (go[1] - old["dp"][0]) * (d1 - dp[0])
-                            - (go[2] - old["dp"][1]) * (d2 - dp[1])))
+         + 0.5 * law.kss * (go[1] * d1 + go[2] * d2 - xs))
     tf_old = [law.kss * (g - q) for g, q in zip(old["gap"][1:], old["dp"])]
     slide = sum((a + b) / 2 * (q1 - q0) for a, b, q1, q0 in zip(tf_old, tf, dp, old["dp"]))
     new.update(D=D, umax=umax, dmax=dmax, dp=dp,

@@ -173,11 +173,36 @@ def test_energy_balance(lp):
     t = np.vstack([[0.0, 0.0, 0.0], r.traction])
     dw = np.sum(0.5 * (t[1:] + t[:-1]) * np.diff(g, axis=0), axis=1)
     psi = stored_energy(law, r.state[-1], path[-1])
-    # midpoint-rule error of the damage term: <= k |dg|^2 / 8 per unit increase of D; a step
-    # across u = 0 adds the trapezoid error of the kink between kc_pen and knn
+    # the rule is exact but in a step across u = 0: the trapezoid misses the kink between kc_pen
+    # and knn there, 0.5 (kc_pen - (1 - D) knn) |u_old u_new| <= 0.5 kc_pen |dg|^2 per crossing
     step = np.max(np.sum(np.diff(g, axis=0) ** 2, axis=1))
-    tol = 1e-3 * np.abs(dw).sum() + 0.25 * max(law.knn, law.kss, law.kc_pen) * step + 1e-12
+    crossings = np.count_nonzero(np.diff(np.sign(g[:, 0])) != 0)
+    tol = 1e-9 * np.abs(dw).sum() + 0.5 * max(law.knn, law.kc_pen) * step * crossings + 1e-12
     assert abs(dw.sum() - psi - r.dissipated[-1]) <= tol
+
+
+def test_energy_balance_when_a_slipped_joint_opens():
+    """The counterexample hypothesis found (2026-12-01): slipped in light compression below its
+    elastic limit, then opened while the slip goes back. Opening lowers the shear strength
+    (paper form: D jumps to 0.3) in the same step as the slider, whose pressure cap falls to
+    zero across u = 0, lets its elastic slip go; the product form of Y booked 0.25 kss dD
+    |d(dp)|^2 too much there (0.0156 J/m^2 of 1.465, 16 x the rest of the balance error)."""
+    law = JointLaw(ft=384615.3846153846, u_k=0.0004745006591042932, zeta=12.0,
+                   knn=147523504250.0, c=156250.0, tan_phi=0.203125, delta_k=0.0006250000033625,
+                   xi=10.0, mu=1.0, kss=49999999731.0, kc_pen=9884074784750.0,
+                   shear_damage="paper")
+    v1 = np.array([-2.014143624e-07, 0.0, 4.54154080e-06])
+    v2 = np.array([6.17261810e-06, 0.0, 0.0])
+    s = np.linspace(0.0, 1.0, 401)[1:, None]
+    path = np.vstack([s * v1, v1 + s * (v2 - v1)])
+    r = drive_joint(law, path)
+    g = np.vstack([[0.0, 0.0, 0.0], path])
+    t = np.vstack([[0.0, 0.0, 0.0], r.traction])
+    dw = np.sum(0.5 * (t[1:] + t[:-1]) * np.diff(g, axis=0), axis=1)
+    assert r.damage.max() > 0.3
+    err = dw.sum() - stored_energy(law, r.state[-1], path[-1]) - r.dissipated[-1]
+    step = np.max(np.sum(np.diff(g, axis=0) ** 2, axis=1))
+    assert abs(err) <= 0.5 * law.kc_pen * step      # one crossing of u = 0
 
 
 @SET
