@@ -6,14 +6,20 @@ crack map (joint damage and block tensile damage) at the frame nearest the peak 
 state (the last frame, or the checkpoint of a run stopped after it), the crushing map (block
 compressive damage) at the last state and, for the house, the
 vertical reactions of each wall and pier (paper Fig. 26).
+``RESULT.h5@ROW`` draws a run as if it had stopped after history row ``ROW`` (a copy of the
+file cut there, in a temporary folder: the rows after a defect left out, as for the S4
+double-clamped cyclic run), in overlays too.
 ``python docs/make_validation_figures.py overlay NAME RESULT.h5=LABEL ...`` draws the response
 curves of runs of one scene on one plot, ``docs/NAME.png`` (and for the house their reactions,
 ``docs/NAME_reactions.png``); rows accepted above tol are marked with open circles. Commands that made the result files
 are listed in docs/validation.md.
 """
 import os
+import shutil
 import sys
+import tempfile
 
+import h5py
 import numpy as np
 
 from dr_masonry.results import ResultsError, open_result
@@ -31,6 +37,32 @@ SCENES = {
                         ("yz", ("transversal_wall_1",), "_W1"),
                         ("yz", ("transversal_wall_2",), "_W2")]),
 }
+
+
+def cut(spec):
+    """``path`` for ``path``; for ``path@ROW`` a copy of the file with its first ``ROW`` history
+    rows, the frames up to that row's increment and no checkpoints (so that its last frame is
+    its last state), in a temporary folder under the same name."""
+    path, sep, row = spec.partition("@")
+    if not sep:
+        return path
+    rows = int(row)
+    out = os.path.join(tempfile.mkdtemp(prefix="figures_"), os.path.basename(path))
+    shutil.copyfile(path, out)
+    with h5py.File(out, "a") as f:
+        h = f["history"]
+        if not 0 < rows <= h["increment"].shape[0]:
+            raise SystemExit(f"{spec}: {path} has {h['increment'].shape[0]} history rows")
+        last = int(h["increment"][rows - 1])
+        for k in list(f["frames"]):
+            if int(k) > last:
+                del f["frames"][k]
+        for k in h:
+            h[k].resize((rows,))
+        for k in ("checkpoint", "checkpoint_new", "checkpoints"):
+            if k in f:
+                del f[k]
+    return out
 
 
 def scene_of(r):
@@ -98,6 +130,7 @@ def overlay(name, specs):
     the house also their reactions, ``docs/name_reactions.png``."""
     from dr_masonry.cli import import_case
     paths, labels = zip(*(spec.split("=", 1) for spec in specs))
+    paths = [cut(p) for p in paths]
     scene = scene_of(open_result(paths[0]))
     xk, yk, ys, _ = SCENES[scene]
     curve = import_case(scene).CURVE
@@ -115,5 +148,5 @@ if __name__ == "__main__":
             print(f)
     else:
         for p in sys.argv[1:]:
-            for f in figures(p):
+            for f in figures(cut(p)):
                 print(f)
