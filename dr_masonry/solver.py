@@ -137,7 +137,8 @@ class SolverOptions:
         (sum over DOFs of |f du|, which equals W_ext on monotonic paths and stays meaningful
         when works of opposite sign cancel, as gravity and the push of a rocking block do).
         An increment that alone moves the error by more than this names the joint points and
-        the element that dissipated most in it (a few such warnings per run)
+        the element that dissipated most in it, or says that no few points hold the move (a few
+        such warnings per run)
     predictor : start each increment from the previous one's displacement increment (same direction)
     coarse : two-level relaxation: a Galerkin coarse correction on the blocks' affine motions
         (:mod:`dr_masonry.coarse`) before every span of ``coarse_every`` iterations; True, False
@@ -1046,16 +1047,22 @@ class Simulation:
         if gross > 0 and abs(jump) > tol * gross and self._balance[1] < BALANCE_JUMPS:
             self._balance[1] += 1
             c, blocks = self.cont, self.model.element_block
-            pts = "; ".join(f"point {k} (node {c.slave[k]}, blocks {self._pair(k)}) "
-                            f"{joint_diss[k]:.3g} J" for k in np.argsort(joint_diss)[::-1][:3]
-                            if joint_diss[k] != 0.0)
+            top = [k for k in np.argsort(joint_diss)[::-1][:3] if joint_diss[k] > 0.0]
             e = int(np.argmax(element_diss)) if element_diss.size else -1
-            where = (f"joint points: {pts or 'none'}; element: "
-                     + (f"{e} (block {blocks[e]}) {element_diss[e]:.3g} J"
-                        if e >= 0 and element_diss[e] > 0.0 else "none"))
+            e = e if e >= 0 and element_diss[e] > 0.0 else -1
+            held = joint_diss[top].sum() + (element_diss[e] if e >= 0 else 0.0)
+            where = "; ".join([f"joint point {k} (node {c.slave[k]}, blocks {self._pair(k)}) "
+                               f"{joint_diss[k]:.3g} J" for k in top]
+                              + ([f"element {e} (block {blocks[e]}) {element_diss[e]:.3g} J"]
+                                 if e >= 0 else []))
+            # a few points that booked most of the move point at them; otherwise the move is
+            # the trapezoidal work rule's over a large step
+            why = (f"most of it booked at {where}" if held >= 0.5 * abs(jump) else
+                   f"no few points hold it (largest: {where or 'none'}), so it is the "
+                   f"trapezoidal work rule's error over this step: use smaller increments")
             warnings.warn(f"increment {self.increment}: the energy balance moved by {jump:.3g} J "
-                          f"({jump / gross:.1%} of the gross work) in this one increment; it "
-                          f"dissipated most at {where}", RuntimeWarning)
+                          f"({jump / gross:.1%} of the gross work) in this one increment; {why}",
+                          RuntimeWarning)
         err = abs(row["balance_error"])
         if err > tol and "balance" not in self._warned:
             self._warned.add("balance")
