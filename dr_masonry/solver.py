@@ -1086,9 +1086,11 @@ class Simulation:
         d, mesh, cont = self.dyn, self.mesh, self.cont
         f = state_fields(d.U, mesh.s_old, cont.s_old)
         if cont.slave.size:
+            on = cont.area > 0.0   # a point off the surface carries no traction
             f.update(opening=cont.gaps[:, 0].copy(),
                      slip=np.hypot(cont.gaps[:, 1], cont.gaps[:, 2]),
-                     sigma=cont.trac[:, 0].copy(), tau=np.hypot(cont.trac[:, 1], cont.trac[:, 2]))
+                     sigma=np.where(on, cont.trac[:, 0], 0.0),
+                     tau=np.where(on, np.hypot(cont.trac[:, 1], cont.trac[:, 2]), 0.0))
         return f
 
     def _write_frame(self):

@@ -62,6 +62,9 @@ def test_block_slides_across_faces_and_off_the_end():
     xs = x[c.slave, 0]
     np.testing.assert_array_equal(~on, xs > 0.4 + 0.05)
     assert hist["contacts_off"][-1] == 2
+    f = sim.fields()     # a point off the surface carries no traction, whatever its law says
+    assert np.all(f["sigma"][~on] == 0.0) and np.all(f["tau"][~on] == 0.0)
+    assert np.all(f["sigma"][on] < 0.0)
     # every point on a face is on the quad under its node (of B from x = 0.2) to within the
     # switching distance, and the gap its law sees is the block's whole slip: continuous through
     # every switch
