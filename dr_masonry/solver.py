@@ -27,7 +27,7 @@ from .kernels.plastic_damage import MP_HMAX, MS_DC, MS_DISS, MS_DT
 from .precompile import ensure_compiled
 
 #: energies of an increment at its current state (:meth:`Simulation._energies`)
-Energies = namedtuple("Energies", "stored f_tot dw ratio diss")
+Energies = namedtuple("Energies", "stored f_tot dw ratio diss element_diss joint_diss")
 #: nodal state (n_nodes, 3) unless noted: X reference coordinates m, U displacements m, V velocities
 #: (m per unit fictitious step), minv (n_nodes,) inverse fictitious masses, free 1/0 per DOF, tied
 #: (n_nodes,) reference point or -1, fext constant loads N, P indirect pattern N per unit factor,
@@ -923,19 +923,24 @@ class Simulation:
         """Forces and state at the current displacements and the energies of the increment so
         far, as :data:`Energies`: stored energy J, external forces incl. reactions (n_nodes, 3)
         N, work increment per DOF (n_nodes, 3) J, the increment's damage dissipation over the
-        external work done, that dissipation J."""
+        external work done, that dissipation J, and its whole dissipation by element
+        (n_elements,) J and by joint point (nc,) J."""
         d, mesh, cont = self.dyn, self.mesh, self.cont
         eint = R.internal_forces(mesh, cont, d)
         # external forces incl. reactions: applied loads on free DOFs, internal forces elsewhere
         f_tot = np.where(d.free > 0, d.fext + self.lam[0] * d.P, d.fint)
         dw = 0.5 * (f_tot + self.f_prev) * (d.U - self._u_committed)
-        ddiss = float(((mesh.s_new[:, :, MS_DISS] - mesh.s_old[:, :, MS_DISS]) * mesh.wdet).sum())
+        element_diss = ((mesh.s_new[:, :, MS_DISS] - mesh.s_old[:, :, MS_DISS])
+                        * mesh.wdet).sum(axis=1)
+        joint_diss = (cont.s_new[:, JS_DISS] - cont.s_old[:, JS_DISS]) * cont.area
+        ddiss = float(element_diss.sum())
         if cont.slave.size:
             dj = (cont.s_new[:, JS_DISS] - cont.s_new[:, JS_DISSF]
                   - cont.s_old[:, JS_DISS] + cont.s_old[:, JS_DISSF])
             ddiss += float(dj @ cont.area)
         w_ext = self.energy["W_ext"] + float(dw.sum())
-        return Energies(eint, f_tot, dw, ddiss / w_ext if w_ext > 0 else 0.0, ddiss)
+        return Energies(eint, f_tot, dw, ddiss / w_ext if w_ext > 0 else 0.0, ddiss, element_diss,
+                        joint_diss)
 
     def _commit(self, info, elapsed, energies):
         """Accept a converged increment (``energies`` from :meth:`_energies` at its end):
@@ -951,9 +956,6 @@ class Simulation:
         self.energy["W_gross"] = self.energy.get("W_gross", 0.0) + float(np.abs(dw).sum())
         self.f_prev = f_tot
         self._u_committed = d.U.copy()
-        # this increment's dissipation by joint point (J) and element (J), for _audit
-        step_diss = ((cont.s_new[:, JS_DISS] - cont.s_old[:, JS_DISS]) * cont.area,
-                     ((mesh.s_new[:, :, MS_DISS] - mesh.s_old[:, :, MS_DISS]) * mesh.wdet).sum(axis=1))
         mesh.s_old[:] = mesh.s_new
         cont.s_old[:] = cont.s_new
         self._mark_pristine()
@@ -997,7 +999,7 @@ class Simulation:
         self._cut_work = [0, 0.0]
         for key, v in row.items():
             self.history.setdefault(key, [np.nan] * (self.increment - 1)).append(float(v))
-        self._audit(row, err, *step_diss)
+        self._audit(row, err, energies.joint_diss, energies.element_diss)
         self.last_residual = info[R.I_RESID]
         self.last_iters = int(info[R.I_ITERS])
         self.last_row = row
