@@ -90,6 +90,18 @@ def _frame_name(increment):
     return f"{int(increment):06d}"
 
 
+def _kept(f):
+    """Increments of the checkpoints kept in the open file ``f``, ascending."""
+    return sorted(int(k) for k in f[KEPT]) if KEPT in f else []
+
+
+def require_kept(path, kept, increment):
+    """ResultsError unless ``increment`` is among ``kept`` (the kept checkpoints of ``path``)."""
+    if increment not in kept:
+        raise ResultsError(f"{path} keeps no checkpoint of increment {increment}; it keeps "
+                           f"{kept or 'none'} (and the last one, /checkpoint)")
+
+
 class ResultWriter:
     """Writer of one results file.
 
@@ -298,10 +310,7 @@ class ResultWriter:
         for name, arr in arrays.items():
             g.create_dataset(name, data=np.asarray(arr))
         g.attrs["complete"] = True
-        self.flush()
-        if CHECKPOINT in f:
-            del f[CHECKPOINT]
-        f.move(CHECKPOINT_NEW, CHECKPOINT)
+        self._install_new()
         if keep:
             name = f"{KEPT}/{_frame_name(increment)}"
             if name in f:
@@ -315,21 +324,25 @@ class ResultWriter:
         after it (a restart from there: :meth:`Simulation.resume` with ``increment``; the rows
         and frames after it go with :meth:`truncate`)."""
         f = self._f
-        kept = sorted(int(k) for k in f[KEPT]) if KEPT in f else []
-        if increment not in kept:
-            raise ResultsError(f"{self.path} keeps no checkpoint of increment {increment}; it "
-                               f"keeps {kept or 'none'} (and the last one, /checkpoint)")
+        kept = _kept(f)
+        require_kept(self.path, kept, increment)
         for k in kept:
             if k > increment:
                 del f[f"{KEPT}/{_frame_name(k)}"]
         if CHECKPOINT_NEW in f:
             del f[CHECKPOINT_NEW]
         f.copy(f[f"{KEPT}/{_frame_name(increment)}"], CHECKPOINT_NEW)
+        self._install_new()
+        self.flush()
+
+    def _install_new(self):
+        """Replace ``/checkpoint`` by the complete ``/checkpoint_new`` (flushed first, so that a
+        kill in between leaves one of them complete on disk)."""
+        f = self._f
         self.flush()
         if CHECKPOINT in f:
             del f[CHECKPOINT]
         f.move(CHECKPOINT_NEW, CHECKPOINT)
-        self.flush()
 
     def flush(self):
         """Write everything to disk."""
@@ -482,7 +495,7 @@ class Result:
     def kept_checkpoints(self):
         """Increments of the checkpoints kept for a restart further back (``/checkpoints``)."""
         with h5py.File(self.path, "r") as f:
-            return sorted(int(k) for k in f[KEPT]) if KEPT in f else []
+            return _kept(f)
 
     @property
     def n_history(self):

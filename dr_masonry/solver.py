@@ -1151,12 +1151,9 @@ class Simulation:
         """
         if self._built:
             raise L.LoadingError("resume() must be called before the first run")
-        if increment is not None:
-            from .results import ResultsError, open_result
-            kept = open_result(path).kept_checkpoints
-            if increment not in kept:
-                raise ResultsError(f"{path} keeps no checkpoint of increment {increment}; it "
-                                   f"keeps {kept or 'none'} (and the last one)")
+        if increment is not None:   # checked before the file is opened for writing
+            from .results import open_result, require_kept
+            require_kept(path, open_result(path).kept_checkpoints, increment)
         self.output = path
         self._resuming = True
         self._resume_increment = increment
