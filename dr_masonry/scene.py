@@ -72,6 +72,10 @@ def run_stages(sim, stages, params):
     :class:`~dr_masonry.interrupts.Terminated`) goes on up with a note saying where the rows so
     far are and how to continue (``dr-masonry`` and the case scripts print just that note); a
     :class:`~dr_masonry.solver.SolverError` gets a note naming the file of the rows so far."""
+    if params.get("resume_from") and not params.get("resume"):
+        raise ParameterError(f"parameter resume_from={params['resume_from']!r} continues a stored "
+                             f"run: add resume=true (without it the run starts again and "
+                             f"overwrites {params.get('h5')})")
     if params.get("resume"):
         from .results import open_result
         path = params["h5"]

@@ -245,6 +245,9 @@ def test_interrupted_run_resumes(tmp_path, monkeypatch, squat):
     assert open_result(params["h5"]).checkpoint()[0] == 8   # frames=1: the last whole increment
     with pytest.raises(ParameterError, match="sigma="):
         squat_wall.run(dict(params, resume=True, sigma=0.2e6))
+    with pytest.raises(ParameterError, match="resume_from=8 continues a stored run: add resume"):
+        squat_wall.run(dict(params, resume_from=8))
+    assert open_result(params["h5"]).n_history == 9          # the file is left as it was
     # solver caps may change (the advice of a run stopped at its iteration cap)
     sim, hist, push = squat_wall.run(dict(params, resume=True, max_iter=150_000, max_cuts=5))
     sim.close()
