@@ -551,7 +551,8 @@ def redetect(model, contacts, x_current, slack=SLIDE_SLACK, reach=None, rows=Non
     if row.size:
         k = moved[row]
         quads, xi, _ = _locate(model, F, fid, xs[k], x, slack)
-        g_old = local_gaps(x, contacts.slave[k], contacts.master[k], contacts.xi[k]) - contacts.gap0[k]
+        g_old = (local_gaps(x, contacts.slave[k], contacts.master[k], contacts.xi[k])
+                 - contacts.gap0[k])
         new.master[k], new.xi[k] = quads, xi
         new.blocks[k, 1] = F["block"][fid]
         new.law[k] = _laws(model, new.blocks[k, 0], new.blocks[k, 1])

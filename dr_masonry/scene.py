@@ -67,8 +67,8 @@ def with_penalty(law, factor):
 def run_stages(sim, stages, params):
     """``sim.run(stages)``; with ``params["resume"]``, continue ``params["h5"]`` from its last
     checkpoint instead, or from the one kept after increment ``params["resume_from"]`` (when
-    not 0; ``dr-masonry info`` lists them); the stored run's parameters must equal ``params`` apart from
-    :data:`SOLVER_KEYS`). A Ctrl-C or SIGTERM (KeyboardInterrupt,
+    not 0; ``dr-masonry info`` lists them); the stored run's parameters must equal ``params``
+    apart from :data:`SOLVER_KEYS`. A Ctrl-C or SIGTERM (KeyboardInterrupt,
     :class:`~dr_masonry.interrupts.Terminated`) goes on up with a note saying where the rows so
     far are and how to continue (``dr-masonry`` and the case scripts print just that note); a
     :class:`~dr_masonry.solver.SolverError` gets a note naming the file of the rows so far."""
