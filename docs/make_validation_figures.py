@@ -22,7 +22,7 @@ import tempfile
 import h5py
 import numpy as np
 
-from dr_masonry.results import ResultsError, open_result
+from dr_masonry.results import ResultsError, open_result, truncate_file
 from dr_masonry.viz.plots import crack_map, plot_history
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -53,12 +53,7 @@ def cut(spec):
         h = f["history"]
         if not 0 < rows <= h["increment"].shape[0]:
             raise SystemExit(f"{spec}: {path} has {h['increment'].shape[0]} history rows")
-        last = int(h["increment"][rows - 1])
-        for k in list(f["frames"]):
-            if int(k) > last:
-                del f["frames"][k]
-        for k in h:
-            h[k].resize((rows,))
+        truncate_file(f, int(h["increment"][rows - 1]), rows)
         for k in ("checkpoint", "checkpoint_new", "checkpoints"):
             if k in f:
                 del f[k]

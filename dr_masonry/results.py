@@ -223,9 +223,7 @@ class ResultWriter:
     @property
     def n_history(self):
         """Number of history rows written."""
-        h = self._f["history"]
-        cols = _columns(h)
-        return int(h[cols[0]].shape[0]) if cols else 0
+        return _n_rows(self._f["history"])
 
     @property
     def frame_ids(self):
@@ -281,16 +279,7 @@ class ResultWriter:
         length then; the checkpoint need not coincide with a frame) so that the continued run
         does not duplicate rows.
         """
-        h = self._f["history"]
-        n = self.n_history
-        if not 0 <= rows <= n:
-            raise ResultsError(f"truncate: {self.path} has {n} history rows, cannot keep {rows}")
-        frames = self._f["frames"]
-        for k in list(frames):
-            if int(k) > int(increment):
-                del frames[k]
-        for k in _columns(h):
-            h[k].resize((rows,))
+        truncate_file(self._f, increment, rows)
         self.flush()
 
     @uninterrupted()
@@ -373,6 +362,27 @@ def model_arrays(model):
     names = list(dict.fromkeys(model.block_group))
     arrays["block_group"] = np.array([names.index(g) for g in model.block_group], dtype=np.int64)
     return arrays, names
+
+
+def truncate_file(f, increment, rows):
+    """Drop, in the open result file ``f`` (h5py, writable), the frames after ``increment`` and
+    the history rows after the first ``rows``."""
+    h = f["history"]
+    n = _n_rows(h)
+    if not 0 <= rows <= n:
+        raise ResultsError(f"truncate: {f.filename} has {n} history rows, cannot keep {rows}")
+    frames = f["frames"]
+    for k in list(frames):
+        if int(k) > int(increment):
+            del frames[k]
+    for k in _columns(h):
+        h[k].resize((rows,))
+
+
+def _n_rows(history_group):
+    """Number of rows of the open file's ``/history`` group."""
+    cols = _columns(history_group)
+    return int(history_group[cols[0]].shape[0]) if cols else 0
 
 
 def _columns(history_group):
