@@ -54,6 +54,9 @@ CONTACT_ARRAYS = {
     "law": np.int64, "blocks": np.int64, "gap0": np.float64,
 }
 
+#: groups and datasets every results file has from its creation on (:func:`check_file`)
+REQUIRED = ("config", "history", "frames", "model/block_group",
+            *(f"model/{name}" for name in MODEL_ARRAYS))
 
 #: frame "position" of the last checkpoint (:meth:`Result.frame`)
 CHECKPOINT = "checkpoint"
@@ -126,7 +129,11 @@ class ResultWriter:
         if mode == "w":
             if model is None:
                 raise ResultsError("ResultWriter: mode 'w' needs a model, got None")
-            self._f = h5py.File(self.path, "w", libver=LIBVER)
+            try:
+                self._f = h5py.File(self.path, "w", libver=LIBVER)
+            except OSError as e:
+                raise ResultsError(f"cannot create results file {self.path!r}: "
+                                   f"{e.strerror or e}") from None
             try:
                 self._create(model, config)
             except BaseException:
@@ -436,15 +443,35 @@ def state_fields(U, s_blocks, s_joints):
 
 
 # ---------------------------------------------------------------------- reading
+def make_folder(path):
+    """Create the output folder ``path`` (and its parents) unless it exists; returns ``path``.
+    Raises :class:`ResultsError` naming the folder when it cannot be made (a file of that name,
+    no permission)."""
+    try:
+        os.makedirs(path, exist_ok=True)
+    except OSError as e:
+        raise ResultsError(f"cannot create the output folder {path!r}: {e.strerror or e}") from None
+    return path
+
+
+def ends_run(position):
+    """Whether a checkpoint's stage position ``(stage, increments done, start values, stages,
+    increments of the stage)`` (None in older files) is the end of its run."""
+    return bool(position) and position[0] == position[3] - 1 and position[1] == position[4]
+
+
 def check_file(path):
     """Raise :class:`ResultsError` unless ``path`` is a dr_masonry results file of this schema."""
     path = os.fspath(path)
+    if os.path.isdir(path):
+        raise ResultsError(f"results file {path!r} is a directory")
     if not os.path.isfile(path):
         raise ResultsError(f"results file {path!r} does not exist")
     try:
         with h5py.File(path, "r") as f:
             fmt = f.attrs.get("format")
             ver = f["config"].attrs.get("schema_version") if "config" in f else None
+            missing = [name for name in REQUIRED if name not in f]
     except OSError as e:
         raise ResultsError(f"results file {path!r} cannot be opened as HDF5: {e}") from None
     if fmt != FORMAT_NAME or ver is None:
@@ -452,6 +479,8 @@ def check_file(path):
     if int(ver) != SCHEMA_VERSION:
         raise ResultsError(f"{path!r} has schema version {int(ver)}, this code reads version "
                            f"{SCHEMA_VERSION}")
+    if missing:
+        raise ResultsError(f"results file {path!r} is damaged: it lacks {', '.join(missing)}")
 
 
 class Result:
@@ -533,6 +562,15 @@ class Result:
         if CHECKPOINT_NEW in f and f[CHECKPOINT_NEW].attrs.get("complete", False):
             return f[CHECKPOINT_NEW]
         raise ResultsError(f"{self.path} has no checkpoint (written with every frame)")
+
+    @property
+    def complete(self):
+        """Whether the stored run ended its last stage: its last checkpoint's stage position
+        (:func:`ends_run`) is the last increment of the last stage."""
+        with h5py.File(self.path, "r") as f:
+            if CHECKPOINT not in f and CHECKPOINT_NEW not in f:
+                return False
+            return ends_run(json.loads(self._checkpoint_group(f).attrs["meta"]).get("stage"))
 
     def checkpoint(self):
         """(increment, arrays dict, meta dict) of the last checkpoint; ResultsError if none."""

@@ -5,6 +5,7 @@ import os
 import numpy as np
 
 from .params import ParameterError, parse_overrides
+from .results import make_folder
 from .solver import SolverError
 
 
@@ -14,6 +15,9 @@ def scene_params(defaults, fast, argv, doc):
     params = parse_overrides(defaults, argv, doc)
     if params["fast"]:                  # the preset first, explicit overrides on top
         params = parse_overrides(dict(defaults, **fast), argv, doc)
+    if not str(params["out"]).strip():
+        raise ParameterError(f"parameter out={params['out']!r}: must name the results' path "
+                             "(without .h5: out.h5, out.png, out.csv, out_vtk/)")
     params["h5"] = params["out"] + ".h5"
     params["progress"] = True
     return params
@@ -81,7 +85,13 @@ def run_stages(sim, stages, params):
         path = params["h5"]
         if not os.path.exists(path):
             raise ParameterError(f"parameter resume=true: no result file {path} to continue")
-        stored = open_result(path).config
+        result = open_result(path)
+        if result.complete and not params.get("resume_from"):
+            raise ParameterError(f"parameter resume=true: {path} is complete "
+                                 f"({len(result.history.get('increment', ()))} rows, the end of "
+                                 f"its last stage): nothing to continue (resume_from=INCREMENT "
+                                 f"goes on from a kept checkpoint; `dr-masonry info` lists them)")
+        stored = result.config
         changed = sorted(k for k in set(stored) & set(params) - SOLVER_KEYS
                          if stored[k] != params[k])
         if changed:
@@ -129,7 +139,7 @@ def finish(sim, out, x, y, xlabel, ylabel, title, reference=None, vtk=True, cycl
     import matplotlib.pyplot as plt
 
     sim.close()
-    os.makedirs(os.path.dirname(out) or ".", exist_ok=True)
+    make_folder(os.path.dirname(out) or ".")
     fig, ax = plt.subplots(figsize=(6, 4))
     if reference is not None:
         ax.plot(reference[0], reference[1], "k--", lw=1, label=reference[2])

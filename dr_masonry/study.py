@@ -39,6 +39,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .params import ParameterError, _coerce
+from .results import ResultsError, make_folder
 
 #: keys the study sets itself in every variant's parameters
 _RESERVED = ("out", "h5", "progress")
@@ -169,7 +170,7 @@ def stage_rows(h5, stage, n_rows):
     attrs = [r.frame_attrs(i) for i in range(r.n_frames)]
     mine = [i for i, a in enumerate(attrs) if a.get("stage") == stage]
     if not mine:
-        raise ValueError(f"{h5}: no frame of stage {stage!r} (stages with frames: "
+        raise ResultsError(f"{h5}: no frame of stage {stage!r} (stages with frames: "
                          f"{sorted({str(a.get('stage')) for a in attrs})})")
     start = attrs[mine[0] - 1]["history_rows"] if mine[0] > 0 else 0
     return slice(int(start), int(attrs[mine[-1]]["history_rows"]))
@@ -212,7 +213,7 @@ def run_variant(scene, label, overrides, out, threads=1):
             if overrides.get("fast"):
                 params.update(mod.FAST)
             params.update(overrides, out=out, h5=h5, progress=False)
-            os.makedirs(os.path.dirname(out) or ".", exist_ok=True)
+            make_folder(os.path.dirname(out) or ".")
             sim = mod.run(params)[0]
             sim.close()
             row.update(_summary(sim.history, mod.CURVE, h5))
@@ -236,7 +237,7 @@ def _summary(history, curve, h5):
     x = hist[curve["x"]][rows] * curve.get("xscale", 1.0)
     y = hist[curve["y"]][rows] * curve.get("yscale", 1.0)
     if y.size == 0:
-        raise ValueError(f"the curve (stage {curve.get('stage')!r}) has no history rows")
+        raise ResultsError(f"the curve (stage {curve.get('stage')!r}) has no history rows")
     k = int(np.argmax(y))
     return dict(increments=n, iterations=int(hist["iterations"].sum()), peak=float(y[k]),
                 x_at_peak=float(x[k]), final=float(y[-1]), x=x, y=y)
@@ -307,7 +308,7 @@ def run_study(scene, variants, base=None, out="results/study", scheduler=None, n
     if n_workers is not None and int(n_workers) < 1:
         raise ParameterError(f"n_workers={n_workers!r}: must be >= 1 (None: one per core)")
     out = os.path.abspath(out)
-    os.makedirs(out, exist_ok=True)
+    make_folder(out)
     paths = [os.path.join(out, n) for n in names]
     say = print if verbose else (lambda *a, **k: None)
 
@@ -349,7 +350,10 @@ def _run_dask(scene, variants, paths, scheduler, n_workers, threads, processes, 
         say(f"LocalCluster: {n} worker {'processes' if processes else 'threads'}, "
             f"{threads} Numba thread(s) each")
     else:
-        client = Client(scheduler)
+        try:
+            client = Client(scheduler)
+        except (OSError, ValueError) as e:
+            raise ParameterError(f"scheduler={scheduler!r}: cannot connect ({e})") from None
         say(f"scheduler {scheduler}: {len(client.scheduler_info()['workers'])} workers")
     rows = []
     try:

@@ -16,7 +16,8 @@ import numpy as np
 import vtk
 from vtk.util.numpy_support import numpy_to_vtk
 
-from dr_masonry.results import Result, open_result
+from dr_masonry.postprocess import PostprocessError
+from dr_masonry.results import Result, make_folder, open_result
 
 
 def as_result(obj):
@@ -26,6 +27,9 @@ def as_result(obj):
 
 def positions(nodes, fields, warp=1.0):
     """Node positions (nn, 3), m: ``nodes + warp * fields["U"]`` (``nodes`` without "U")."""
+    if (isinstance(warp, bool) or not isinstance(warp, (int, float, np.integer, np.floating))
+            or not np.isfinite(warp)):
+        raise PostprocessError(f"warp={warp!r}: the displacement scale must be a finite number")
     if warp and "U" in fields:
         return nodes + warp * fields["U"]
     return nodes.copy()
@@ -164,7 +168,7 @@ def export_vtk(h5_path, out_dir=None, warp=1.0):
     r = as_result(h5_path)
     if out_dir is None:
         out_dir = os.path.splitext(r.path)[0] + "_vtk"
-    os.makedirs(out_dir, exist_ok=True)
+    make_folder(out_dir)
     arrays = r.model_arrays
     times = frame_times(r)
     blocks, contacts = [], []
