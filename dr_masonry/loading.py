@@ -29,6 +29,23 @@ class LoadingError(ValueError):
     """Invalid loading input; the message names the control and the value."""
 
 
+def _number(x):
+    """Whether ``x`` is a finite real number (not a bool)."""
+    return (isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, (bool, np.bool_))
+            and bool(np.isfinite(x)))
+
+
+def _vector(what, x, n=None):
+    """``x`` as a finite float64 array (of ``n`` values when given), else LoadingError naming it."""
+    try:
+        a = np.asarray(x, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise LoadingError(f"{what}: {x!r} is not a list of numbers") from None
+    if a.ndim > 1 or (n is not None and a.size != n) or not np.all(np.isfinite(a)):
+        raise LoadingError(f"{what}: {x!r} must be {n or 'a list of'} finite numbers")
+    return a.ravel()
+
+
 def dof_index(dof, rotations=True):
     """Index 0..5 of a DOF name ``x, y, z, rx, ry, rz``."""
     if dof not in DOFS or (not rotations and DOFS[dof] > 2):
@@ -63,6 +80,10 @@ class Gravity:
     g: float = 9.81
     name: str = "gravity"
 
+    def __post_init__(self):
+        if not _number(self.g):
+            raise LoadingError(f"Gravity {self.name!r}: g={self.g!r} must be a finite number (m/s^2)")
+
 
 @dataclass(eq=False)
 class BodyForce:
@@ -74,6 +95,9 @@ class BodyForce:
     blocks: object = None
     name: str = "body"
 
+    def __post_init__(self):
+        self.accel = tuple(_vector(f"BodyForce {self.name!r}: accel", self.accel, 3))
+
 
 @dataclass(eq=False)
 class Pressure:
@@ -81,6 +105,12 @@ class Pressure:
     their normal (positive pressure pushes into the face's block), reference configuration."""
     quads: np.ndarray
     name: str = "pressure"
+
+    def __post_init__(self):
+        q = np.asarray(self.quads)
+        if q.ndim != 2 or q.shape[1] != 4 or q.dtype.kind not in "iu" or (q.size and q.min() < 0):
+            raise LoadingError(f"Pressure {self.name!r}: quads must be an (m, 4) array of node ids "
+                               f">= 0, got shape {q.shape}, dtype {q.dtype}")
 
 
 @dataclass(eq=False)
@@ -90,6 +120,11 @@ class PointLoad:
     dof: str
     value: float = 1.0
     name: str = "point"
+
+    def __post_init__(self):
+        if not _number(self.value):
+            raise LoadingError(f"PointLoad {self.name!r}: value={self.value!r} must be a finite "
+                               "number (N)")
 
 
 @dataclass(eq=False)
@@ -106,6 +141,17 @@ class Combined:
     parts: list
     name: str = "combined"
 
+    def __post_init__(self):
+        for part in self.parts:
+            if not (isinstance(part, (tuple, list)) and len(part) == 2 and isinstance(part[0], PATTERNS)
+                    and _number(part[1])):
+                raise LoadingError(f"Combined {self.name!r}: parts must be (pattern, finite weight) "
+                                   f"pairs, got {part!r}")
+
+
+#: the load pattern types a :class:`Load`, :class:`Indirect` or :class:`Combined` takes
+PATTERNS = (Gravity, BodyForce, Pressure, PointLoad, StoredPattern, Combined)
+
 
 # ------------------------------------------------------------------ controls
 @dataclass(eq=False)
@@ -113,6 +159,18 @@ class _Control:
     to: float = None
     path: object = None
     name: str = None
+
+    def __post_init__(self):
+        if self.to is not None and not _number(self.to):
+            raise LoadingError(f"control {self.label}: to={self.to!r} must be a finite number")
+        if self.path is not None:
+            self.path = _vector(f"control {self.label}: path", self.path)
+        if hasattr(self, "target") and not isinstance(self.target, (RigidPoint, NodeSet)):
+            raise LoadingError(f"control {self.label}: target must be a RigidPoint or NodeSet "
+                               f"(Simulation.rigid_point, node_set), got {self.target!r}")
+        if hasattr(self, "pattern") and not isinstance(self.pattern, PATTERNS):
+            raise LoadingError(f"control {self.label}: pattern must be one of "
+                               f"{[t.__name__ for t in PATTERNS]}, got {self.pattern!r}")
 
     def values(self, start, n):
         """Target values (n,) of this control over a stage of n increments starting at ``start``."""
@@ -178,9 +236,18 @@ class Stage:
     tol: float = None
 
     def __post_init__(self):
-        if int(self.increments) < 1:
-            raise LoadingError(f"stage {self.name!r}: increments must be >= 1, got {self.increments}")
+        for key, low in (("increments", 1), ("frames", 1), ("max_iter", 1)):
+            v = getattr(self, key)
+            if not (v is None and key == "max_iter" or _number(v) and float(v).is_integer()
+                    and v >= low):
+                raise LoadingError(f"stage {self.name!r}: {key}={v!r} must be an integer >= {low}")
         self.increments = int(self.increments)
+        if self.tol is not None and not (_number(self.tol) and self.tol > 0):
+            raise LoadingError(f"stage {self.name!r}: tol={self.tol!r} must be a finite number > 0")
+        if not isinstance(self.controls, (list, tuple)) or not all(isinstance(c, _Control)
+                                                                    for c in self.controls):
+            raise LoadingError(f"stage {self.name!r}: controls must be a list of Displacement, "
+                               f"Force, Load and Indirect controls, got {self.controls!r}")
         if sum(isinstance(c, Indirect) for c in self.controls) > 1:
             raise LoadingError(f"stage {self.name!r}: at most one Indirect control per stage")
 

@@ -26,6 +26,24 @@ HEX_NATURAL = np.array(
 BLOCK_FACES = ((2, -1), (2, 1), (1, -1), (1, 1), (0, -1), (0, 1))
 
 
+def id_array(what, ids, n, error=None):
+    """``ids`` (one id or an iterable of them) as an int64 array, each an integer in [0, n);
+    else ``error`` (default :class:`ModelError`) naming ``what`` and the first bad id. Negative
+    ids are refused (numpy would count them from the end)."""
+    error = error or ModelError
+    a = np.atleast_1d(np.asarray(ids)).ravel()
+    if a.dtype.kind in "iu":
+        bad = (a < 0) | (a >= n)
+    elif a.dtype.kind == "f":
+        with np.errstate(invalid="ignore"):
+            bad = ~np.isfinite(a) | (a != np.round(a)) | (a < 0) | (a >= n)
+    else:   # bools, strings, objects: none of them is an id
+        bad = np.ones(a.shape, dtype=bool)
+    if bad.any():
+        raise error(f"{what}: id {a[np.argmax(bad)].item()!r} is not an integer in [0, {n})")
+    return a.astype(np.int64)
+
+
 class ModelError(ValueError):
     """Invalid model input; the message names the block, parameter and value."""
 
@@ -162,11 +180,15 @@ class Model:
             raise ModelError(f"block {b}: corners must have shape (8, 3), got {c.shape}")
         if not np.all(np.isfinite(c)):
             raise ModelError(f"block {b}: corners contain NaN or Inf: {c.tolist()}")
-        div = tuple(int(v) for v in divisions)
-        if len(div) != 3 or min(div) < 1:
-            raise ModelError(f"block {b}: divisions must be three integers >= 1, got {divisions}")
+        div = tuple(np.atleast_1d(np.asarray(divisions, dtype=object)))
+        if len(div) != 3 or any(isinstance(v, (bool, np.bool_)) or not isinstance(
+                v, (int, np.integer)) or v < 1 for v in div):
+            raise ModelError(f"block {b}: divisions must be three integers >= 1, got {divisions!r}")
+        div = tuple(int(v) for v in div)
         if material is None or not hasattr(material, "params_array"):
             raise ModelError(f"block {b}: material must be a PlasticDamage, got {material!r}")
+        if not isinstance(fixed, (bool, np.bool_)):
+            raise ModelError(f"block {b}: fixed must be True or False, got {fixed!r}")
         self._check_corners(b, c)
         nx, ny, nz = div
         gi = np.linspace(-1.0, 1.0, nx + 1)
@@ -302,7 +324,7 @@ class Model:
 
     def block_nodes(self, blocks):
         """Global node ids (sorted int64 array) of one block id or an iterable of them."""
-        blocks = np.atleast_1d(np.asarray(blocks, dtype=np.int64))
+        blocks = id_array("block_nodes: block", blocks, self.n_blocks)
         s = self.block_node_start
         return np.concatenate([np.arange(s[b], s[b + 1]) for b in blocks]) if blocks.size \
             else np.zeros(0, np.int64)
@@ -318,6 +340,8 @@ class Model:
             global node ids of the element faces, ordered so that their normal points out of
             the block.
         """
+        b = int(id_array("block_face: block", b, self.n_blocks)[0])
+        f = int(id_array("block_face: face", f, len(BLOCK_FACES))[0])
         axis, side = BLOCK_FACES[f]
         nx, ny, nz = self._divisions[b]
         n0 = self._node_start[b]

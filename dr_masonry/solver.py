@@ -24,6 +24,9 @@ from .kernels.forces import Cont, Mesh
 from .kernels.hex8 import hex_geometry_shared, lumped_mass, pristine_elements, stiffness_rowsum
 from .kernels.joint_law import JS_D, JS_DISS, JS_DISSF
 from .kernels.plastic_damage import MP_HMAX, MS_DC, MS_DISS, MS_DT
+from .materials import JointLaw, PlasticDamage
+from .model import ModelError, id_array
+from .results import ResultsError, ends_run
 from .precompile import ensure_compiled
 
 #: energies of an increment at its current state (:meth:`Simulation._energies`)
@@ -40,6 +43,11 @@ Dyn = namedtuple("Dyn", "X U V minv free tied fext P fint res rpX rpU rpV rpminv
 
 DAMPING = {"kinetic": R.DAMP_KINETIC, "viscous": R.DAMP_VISCOUS, "local": R.DAMP_LOCAL,
            "fire": R.DAMP_FIRE}
+#: valid ``SolverOptions.alpha`` of each damping scheme: (test, what the message says)
+ALPHA_RANGE = {"viscous": (lambda a: a > 0, "> 0 (fraction of critical damping)"),
+               "local": (lambda a: 0 <= a < 1, "in [0, 1) (Cundall's coefficient)"),
+               "kinetic": (lambda a: True, "(unused by kinetic damping)"),
+               "fire": (lambda a: 0 < a <= 1, "in (0, 1] (FIRE's alpha_start)")}
 
 
 #: "auto" coarse correction from this many movable blocks on (walls; not couplets and triplets)
@@ -85,6 +93,26 @@ def _reaction_rows(pairs, blocks, support):
 def _shortest_edge(q):
     """Shortest edge (m) of each quad with corners ``q`` (nc, 4, 3)."""
     return np.linalg.norm(q[:, [1, 2, 3, 0]] - q, axis=2).min(axis=1)
+
+
+def _check_materials(model):
+    """ModelError naming the first block whose material is not a PlasticDamage or the first
+    joint law (and a block using it) that is not a JointLaw: the model container takes any
+    object, the solver needs these."""
+    for b, k in enumerate(model.block_material):
+        if not isinstance(model.materials[k], PlasticDamage):
+            raise ModelError(f"block {b}: material must be a PlasticDamage, got "
+                             f"{model.materials[k]!r}")
+    for k, law in enumerate(model.joint_laws):
+        if not isinstance(law, JointLaw):
+            users = np.flatnonzero(np.asarray(model.block_joint) == k)
+            which = f"block {users[0]}'s joint" if users.size else "the default joint law"
+            raise ModelError(f"{which} must be a JointLaw, got {law!r}")
+
+
+class OptionsError(ValueError):
+    """A bad :class:`SolverOptions` field; the message names the field, the value and what is
+    valid."""
 
 
 class SolverError(RuntimeError):
@@ -185,38 +213,37 @@ class SolverOptions:
 
     def __post_init__(self):
         if self.damping not in DAMPING:
-            raise ValueError(f"SolverOptions.damping: {self.damping!r} is not one of {list(DAMPING)}")
+            raise OptionsError(f"SolverOptions.damping={self.damping!r}: valid values are "
+                               f"{list(DAMPING)}")
         if self.alpha is None:
             self.alpha = {"viscous": 1.0, "local": 0.8, "kinetic": 0.0, "fire": 0.1}[self.damping]
-        for name in ("tol", "safety", "energy_tol"):
+        for name in ("redetect", "predictor", "progress"):
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise OptionsError(f"SolverOptions.{name}={getattr(self, name)!r}: must be True or "
+                                   "False")
+        if not (isinstance(self.coarse, (bool, np.bool_)) or self.coarse == "auto"):
+            raise OptionsError(f"SolverOptions.coarse={self.coarse!r}: must be True, False or "
+                               "'auto'")
+        for name, low in (("max_iter", 1), ("check_every", 1), ("coarse_every", 1),
+                          ("max_cuts", 0), ("stall_iter", 0)):
             v = getattr(self, name)
-            if not (np.isfinite(v) and v > 0):
-                raise ValueError(f"SolverOptions.{name} must be positive and finite, got {v}")
-        if not (np.isfinite(self.floor_tol) and (self.floor_tol == 0.0 or self.floor_tol >= self.tol)):
-            raise ValueError(f"SolverOptions.floor_tol must be 0 (off) or >= tol = {self.tol}, got "
-                             f"{self.floor_tol}")
-        if not (np.isfinite(self.ring) and 0.0 <= self.ring < 2.0):
-            raise ValueError(f"SolverOptions.ring must be in [0, 2) (0: off), got {self.ring}")
-        if self.safety < 1.0:
-            raise ValueError(f"SolverOptions.safety must be >= 1 for a stable step, got {self.safety}")
-        if self.coarse not in (True, False, "auto"):
-            raise ValueError(f"SolverOptions.coarse must be True, False or 'auto', got "
-                             f"{self.coarse!r}")
-        if not (np.isfinite(self.max_dissipation) and self.max_dissipation >= 0):
-            raise ValueError(f"SolverOptions.max_dissipation must be >= 0 (0: off), got "
-                             f"{self.max_dissipation}")
-        if not isinstance(self.redetect, (bool, np.bool_)):
-            raise ValueError(f"SolverOptions.redetect must be True or False, got {self.redetect!r}")
-        for name in ("checkpoint_s", "keep_checkpoint_s"):
+            if not (isinstance(v, (int, np.integer)) and not isinstance(v, (bool, np.bool_))
+                    and v >= low):
+                raise OptionsError(f"SolverOptions.{name}={v!r}: must be an integer >= {low}")
+        for name, ok, what in (
+                ("tol", lambda v: v > 0, "> 0"),
+                ("safety", lambda v: v >= 1.0, ">= 1 for a stable step"),
+                ("energy_tol", lambda v: v > 0, "> 0"),
+                ("floor_tol", lambda v: v == 0.0 or v >= self.tol, f"0 (off) or >= tol = {self.tol}"),
+                ("ring", lambda v: 0.0 <= v < 2.0, "in [0, 2) (0: off)"),
+                ("max_dissipation", lambda v: v >= 0, ">= 0 (0: off)"),
+                ("checkpoint_s", lambda v: v >= 0, ">= 0 s"),
+                ("keep_checkpoint_s", lambda v: v >= 0, ">= 0 s"),
+                ("alpha", ALPHA_RANGE[self.damping][0], ALPHA_RANGE[self.damping][1])):
             v = getattr(self, name)
-            if not (np.isfinite(v) and v >= 0):
-                raise ValueError(f"SolverOptions.{name} must be >= 0 s, got {v}")
-        if (self.max_iter < 1 or self.check_every < 1 or self.max_cuts < 0
-                or self.coarse_every < 1 or self.stall_iter < 0):
-            raise ValueError("SolverOptions: max_iter, check_every and coarse_every must be >= 1, "
-                             f"max_cuts and stall_iter >= 0 (got {self.max_iter}, "
-                             f"{self.check_every}, {self.coarse_every}, {self.max_cuts}, "
-                             f"{self.stall_iter})")
+            if not (isinstance(v, (int, float, np.integer, np.floating))
+                    and not isinstance(v, (bool, np.bool_)) and np.isfinite(v) and ok(v)):
+                raise OptionsError(f"SolverOptions.{name}={v!r}: must be a finite number {what}")
 
 
 class Simulation:
@@ -247,8 +274,12 @@ class Simulation:
         self.options = options or SolverOptions()
         self.output = output
         self.config = dict(config or {})
+        if not isinstance(self.options, SolverOptions):
+            raise OptionsError(f"Simulation: options must be a SolverOptions, got "
+                               f"{type(self.options).__name__}")
         if model.n_blocks == 0:
-            raise ValueError("model has no blocks")
+            raise ModelError("Simulation: the model has no blocks")
+        _check_materials(model)
         if model.contacts is None:
             detect_contacts(model)
         self.rigid_points = []
@@ -282,9 +313,7 @@ class Simulation:
     def node_set(self, name, nodes):
         """Register a named node set (int array of node ids)."""
         self._check_name(name)
-        nodes = np.unique(np.asarray(nodes, dtype=np.int64))
-        if nodes.size == 0 or nodes.min() < 0 or nodes.max() >= self.model.n_nodes:
-            raise L.LoadingError(f"node set {name!r}: node ids must be in [0, {self.model.n_nodes})")
+        nodes = self._nodes(f"node set {name!r}", nodes)
         ns = L.NodeSet(name, nodes)
         self.node_sets[name] = ns
         return ns
@@ -314,9 +343,17 @@ class Simulation:
 
     def fix(self, nodes, dofs="xyz"):
         """Clamp DOFs (any of 'x', 'y', 'z') of the given nodes (supports, symmetry planes)."""
-        nodes = np.asarray(nodes, dtype=np.int64)
+        nodes = self._nodes("fix", nodes)
         for d in dofs:
             self._fixed[nodes, L.dof_index(d, rotations=False)] = True
+
+    def _nodes(self, what, nodes):
+        """``nodes`` as sorted unique node ids; LoadingError naming ``what`` when the set is
+        empty (e.g. a ``plane_nodes`` that found no node) or an id is not a node."""
+        nodes = np.unique(id_array(what, nodes, self.model.n_nodes, L.LoadingError))
+        if nodes.size == 0:
+            raise L.LoadingError(f"{what}: no nodes given (an empty node set)")
+        return nodes
 
     def rigid_point(self, name, blocks=None, nodes=None, position=None):
         """Tie the nodes of ``blocks`` (or ``nodes``) rigidly to a reference point with 6 DOFs.
@@ -330,11 +367,12 @@ class Simulation:
             if blocks is None:
                 raise L.LoadingError(f"rigid point {name!r}: give blocks or nodes")
             nodes = self.model.block_nodes(blocks)
-        nodes = np.unique(np.asarray(nodes, dtype=np.int64))
+        nodes = self._nodes(f"rigid point {name!r}", nodes)
         for rp in self.rigid_points:
             if np.intersect1d(rp.nodes, nodes).size:
                 raise L.LoadingError(f"rigid point {name!r} shares nodes with {rp.name!r}")
-        pos = self.model.nodes[nodes].mean(axis=0) if position is None else np.asarray(position, float)
+        pos = (self.model.nodes[nodes].mean(axis=0) if position is None
+               else L._vector(f"rigid point {name!r}: position", position, 3))
         rp = L.RigidPoint(name, nodes, pos, len(self.rigid_points))
         self.rigid_points.append(rp)
         return rp
@@ -443,8 +481,8 @@ class Simulation:
         self._u_committed = np.zeros((n, 3))
         if self.output is not None:
             import os
-            from .results import ResultWriter
-            os.makedirs(os.path.dirname(os.path.abspath(self.output)), exist_ok=True)
+            from .results import ResultWriter, make_folder
+            make_folder(os.path.dirname(os.path.abspath(self.output)))
             cfg = dict(self.config, solver=asdict(self.options))
             self.writer = ResultWriter(self.output, m, cfg, mode="a" if self._resuming else "w")
         self._built = True
@@ -529,8 +567,15 @@ class Simulation:
             P[nodes] = self.mass[nodes, None] * acc[None, :]
         elif isinstance(pat, L.Pressure):
             q = np.asarray(pat.quads, dtype=np.int64)
+            if q.size and q.max() >= n:
+                raise L.LoadingError(f"Pressure {pat.name!r}: node id {q.max()} in quads, the model "
+                                     f"has {n} nodes")
             x = m.nodes[q]
             av = 0.5 * np.cross(x[:, 2] - x[:, 0], x[:, 3] - x[:, 1])  # area vector, outward
+            flat = np.flatnonzero(np.linalg.norm(av, axis=1) == 0.0)
+            if flat.size:
+                raise L.LoadingError(f"Pressure {pat.name!r}: quad {flat[0]} {q[flat[0]].tolist()} "
+                                     "has zero area")
             for a in range(4):
                 np.add.at(P, q[:, a], -0.25 * av)
         elif isinstance(pat, L.PointLoad):
@@ -558,6 +603,23 @@ class Simulation:
             return (type(ctl).__name__ == "Force", t.name,
                     L.dof_index(ctl.dof, isinstance(t, L.RigidPoint)))
         return ("load", ctl.pattern.name)
+
+    def _check_controls(self, stage):
+        """LoadingError when two controls of ``stage`` act on one DOF (a Force and a
+        Displacement too) or on one pattern's factor (a Load and an Indirect): the last would
+        silently win."""
+        seen = {}
+        for ctl in stage.controls:
+            acts = [self._key(ctl)[1:]]    # (target, dof) or (pattern,)
+            if isinstance(ctl, L.Indirect):
+                acts.append((ctl.pattern.name,))
+            for what in acts:
+                if what in seen:
+                    on = (f"DOF {what[1]} of {what[0]!r}" if len(what) == 2
+                          else f"the factor of pattern {what[0]!r}")
+                    raise L.LoadingError(f"stage {stage.name!r}: controls {seen[what].label} and "
+                                         f"{ctl.label} both act on {on}")
+                seen[what] = ctl
 
     def _apply(self, ctl, value):
         """Impose one control value on the arrays (before relaxing an increment)."""
@@ -617,6 +679,7 @@ class Simulation:
             self.build()
         ensure_compiled(self.mesh, self.cont, self.dyn)
         for stage in stages:  # register every prescribed node set so history columns stay fixed
+            self._check_controls(stage)
             for ctl in stage.controls:
                 if isinstance(ctl, (L.Displacement, L.Indirect)) and isinstance(ctl.target, L.NodeSet):
                     k = L.dof_index(ctl.dof, rotations=False)
@@ -651,9 +714,9 @@ class Simulation:
         """
         pos = self._checkpoint_stage
         if pos is not None:
-            k, i, starts, n_stages, n = pos
-            if k == n_stages - 1 and i == n:   # a finished run: the stages given come after it
+            if ends_run(pos):   # a finished run: the stages given come after it
                 return 0, 0, None
+            k, i, starts = pos[:3]
             if k >= len(stages) or i > stages[k].increments:
                 raise L.LoadingError(f"resume {self.output}: the checkpoint is at increment {i} of "
                                      f"stage {k}, the stages given have fewer (not the same run)")
@@ -1159,16 +1222,31 @@ class Simulation:
         self._resume_increment = increment
         self.build()
 
+    def _check_checkpoint(self, arrays):
+        """Raise a clear error unless the checkpoint ``arrays`` fit this model and are finite."""
+        d = self.dyn
+        need = {k: getattr(d, k).shape for k in self._STATE}
+        need.update(rp_force=self.rp_force.shape, lam=self.lam.shape, s_blocks=self.mesh.s_old.shape,
+                    s_joints=self.cont.s_old.shape, f_prev=None, du_prev=None)
+        for k, shape in need.items():
+            if k not in arrays:
+                raise ResultsError(f"checkpoint of {self.output} is damaged: it lacks {k}")
+            a = np.asarray(arrays[k])
+            if shape is not None and a.shape != shape:
+                raise L.LoadingError(f"checkpoint of {self.output}: {k} has shape {a.shape}, this "
+                                     f"model needs {shape} (not the same model)")
+            if a.dtype.kind == "f" and not np.isfinite(a).all():
+                raise ResultsError(f"checkpoint of {self.output} is damaged: {k} holds "
+                                   f"{np.count_nonzero(~np.isfinite(a))} non-finite values")
+
     def _load_checkpoint(self):
         from .results import open_result
         if self._resume_increment is not None:
             self.writer.rewind(int(self._resume_increment))
         inc, arrays, meta = open_result(self.output).checkpoint()
         d = self.dyn
+        self._check_checkpoint(arrays)
         for k in self._STATE:
-            if arrays[k].shape != getattr(d, k).shape:
-                raise L.LoadingError(f"checkpoint of {self.output}: {k} has shape {arrays[k].shape}, "
-                                     f"this model needs {getattr(d, k).shape} (not the same model)")
             getattr(d, k)[:] = arrays[k]
         self.rp_force[:] = arrays["rp_force"]
         self.lam[:] = arrays["lam"]

@@ -151,6 +151,10 @@ class JointLaw:
 
     def with_changes(self, **changes):
         """A copy with some fields replaced (validated again)."""
+        unknown = set(changes) - {f.name for f in dataclasses.fields(self)}
+        if unknown:
+            raise JointLawError(f"JointLaw.with_changes: unknown fields {sorted(unknown)}; valid: "
+                                f"{[f.name for f in dataclasses.fields(self)]}")
         return dataclasses.replace(self, **changes)
 
     # ------------------------------------------------------------------ queries

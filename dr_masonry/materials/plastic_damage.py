@@ -11,7 +11,7 @@ axis scaled by h_ref / h (crack band), so the energy per unit crack area does no
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
@@ -207,6 +207,10 @@ class PlasticDamage:
 
     def with_changes(self, **kw):
         """A copy with some parameters changed (validated again)."""
+        unknown = set(kw) - {f.name for f in fields(self)}
+        if unknown:
+            raise MaterialError(f"PlasticDamage.with_changes: unknown fields {sorted(unknown)}; "
+                                f"valid: {[f.name for f in fields(self)]}")
         return replace(self, **kw)
 
     # ------------------------------------------------------------------ kernel data
