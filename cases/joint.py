@@ -26,13 +26,15 @@ import numpy as np
 from dr_masonry.cli import run_script
 from dr_masonry.drivers_joint import drive_joint
 from dr_masonry.materials.joint import JointLaw
+from dr_masonry.params import ParameterError, parse_overrides
+from dr_masonry.results import make_folder
 from dr_masonry.units import MPa, mm
 
 PARAMS = dict(
     out="results/joint",
     shear_damage="calibrated",  # or "paper" (eq (7) literally)
     steps=2000,                 # points per monotonic leg
-    sigmas_MPa="0,-0.2,-0.6,-1.0",
+    sigmas_MPa=(0.0, -0.2, -0.6, -1.0),   # normal stresses of the shear paths
     cyclic_sigma_MPa=-0.6,
     soft_amp_mm=0.3,
     fric_amp_mm=1.5,
@@ -56,7 +58,7 @@ def build(params):
     # monotonic paths pass exactly through the peak and the end of softening
     u = np.union1d(np.linspace(0.0, 1.2 * law.u_k, n + 1), [law.ft / law.knn, law.u_k])[1:]
     paths = {"tension": np.column_stack([u, 0 * u, 0 * u])}
-    for s in (float(v) * MPa for v in str(params["sigmas_MPa"]).split(",")):
+    for s in (float(v) * MPa for v in params["sigmas_MPa"]):
         d = np.union1d(np.linspace(0.0, 2 * law.delta_k, n + 1), [law.fs(s) / law.kss, law.delta_k])
         paths[f"shear {s / MPa:g} MPa"] = np.column_stack([np.full(d.size, s / law.kc_pen), d, 0 * d])
     uc = float(params["cyclic_sigma_MPa"]) * MPa / law.kc_pen
@@ -91,7 +93,7 @@ def run(params, out):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    os.makedirs(out, exist_ok=True)
+    make_folder(out)
     law, paths = build(params)
     res = {k: drive_joint(law, p) for k, p in paths.items()}
     summary = {}
@@ -156,25 +158,27 @@ def run(params, out):
     return summary
 
 
-def _parse(argv):
-    params = dict(PARAMS)
-    for arg in argv:
-        key, sep, val = arg.partition("=")
-        if not sep or key not in PARAMS:
-            raise SystemExit(f"unknown argument {arg!r}; keys: {', '.join(PARAMS)}")
-        params[key] = type(PARAMS[key])(val)
-    return params
+def check(params):
+    """Raise :class:`ParameterError` naming the first parameter with a value the scene cannot
+    drive (``steps`` an integer >= 2, amplitudes > 0, stresses finite and <= 0)."""
+    if params["shear_damage"] not in ("calibrated", "paper"):
+        raise ParameterError(f"parameter shear_damage={params['shear_damage']!r}: valid values "
+                             "are 'calibrated', 'paper'")
+    if params["steps"] < 2:
+        raise ParameterError(f"parameter steps={params['steps']!r}: must be >= 2 points per leg")
+    for key in ("soft_amp_mm", "fric_amp_mm"):
+        if not (np.isfinite(params[key]) and params[key] > 0):
+            raise ParameterError(f"parameter {key}={params[key]!r}: must be a slip > 0 mm")
+    sig = (*params["sigmas_MPa"], params["cyclic_sigma_MPa"])
+    if not params["sigmas_MPa"] or not all(np.isfinite(v) and v <= 0 for v in sig):
+        raise ParameterError(f"parameters sigmas_MPa={params['sigmas_MPa']!r}, cyclic_sigma_MPa="
+                             f"{params['cyclic_sigma_MPa']!r}: at least one stress, each finite "
+                             "and <= 0 (compression)")
 
 
 def main(argv=None):
-    argv = sys.argv[1:] if argv is None else list(argv)
-    if any(a in ("-h", "--help") for a in argv):
-        print(__doc__)
-        print("PARAMS defaults:")
-        for k, v in PARAMS.items():
-            print(f"  {k}={v}")
-        return 0
-    params = _parse(argv)
+    params = parse_overrides(PARAMS, argv, __doc__)
+    check(params)
     law = JointLaw.reference(shear_damage=params["shear_damage"])
     summary = run(params, params["out"])
     u0 = law.ft / law.knn

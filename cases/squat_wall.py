@@ -130,7 +130,10 @@ def rig(params, law, block):
     brick = MESHES[choice(params, "mesh", tuple(MESHES))]
     model = Model()
     model.set_joint_law(with_penalty(law, params["kc_factor"]))
-    courses = max(1, int(round(params["height"] / brick.height)))
+    if not (np.isfinite(params["height"]) and params["height"] >= 0.5 * brick.height):
+        raise ParameterError(f"parameter height={params['height']!r}: must be at least half a "
+                             f"course ({brick.height} m)")
+    courses = int(round(params["height"] / brick.height))
     wall = add_wall(model, (0, 0, 0), params["length"], courses * brick.height, block,
                     brick=brick, fit="cut")
     L, t, H = wall.length, wall.thickness, wall.height

@@ -18,12 +18,12 @@ from dr_masonry import (Displacement, Force, JointLaw, Model, PlasticDamage, Sim
                         Stage)
 from dr_masonry.cli import run_script
 from dr_masonry.geometry import plane_nodes
-from dr_masonry.params import parse_overrides
+from dr_masonry.params import ParameterError, parse_overrides
 from dr_masonry.scene import finish, solver_options
 from dr_masonry.units import MPa, mm
 
 PARAMS = dict(
-    sigmas="0.2,0.6,1.0",   # pre-compressions, MPa (comma separated)
+    sigmas=(0.2, 0.6, 1.0),  # pre-compressions, MPa (> 0; comma separated on the command line)
     slip=1.5 * mm,          # final slip of the middle block, m
     increments=150,         # shear increments (quadratic spacing: fine near the peak)
     nx=4, ny=2, nz=1,       # hexahedra per block (length, thickness, height)
@@ -69,11 +69,24 @@ def run(params, sigma):
     return sim, hist["push.ux"][shear], hist["push.fx"][shear] / (2 * AREA)
 
 
+def check(params):
+    """Raise :class:`ParameterError` naming the first parameter the scene cannot run with."""
+    if not params["sigmas"] or not all(np.isfinite(v) and v > 0 for v in params["sigmas"]):
+        raise ParameterError(f"parameter sigmas={params['sigmas']!r}: at least one pre-compression,"
+                             " each finite and > 0 MPa")
+    if not (np.isfinite(params["slip"]) and params["slip"] > 0):
+        raise ParameterError(f"parameter slip={params['slip']!r}: must be > 0 m")
+    for key in ("increments", "nx", "ny", "nz"):
+        if params[key] < 1:
+            raise ParameterError(f"parameter {key}={params[key]!r}: must be >= 1")
+
+
 def main(argv=None):
     params = parse_overrides(PARAMS, sys.argv[1:] if argv is None else argv, __doc__)
     params["progress"] = True
     law = JointLaw.reference()
-    for s in [float(v) * MPa for v in params["sigmas"].split(",")]:
+    check(params)
+    for s in [float(v) * MPa for v in params["sigmas"]]:
         out = f"{params['out']}_{s / MPa:.1f}MPa"
         sim, slip, tau = run(dict(params, h5=out + ".h5"), s)
         peak, res = law.c + law.tan_phi * s, law.mu * s
