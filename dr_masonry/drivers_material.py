@@ -106,7 +106,12 @@ def drive_mixed(material, eps, free, h=None, tol=1e-8, max_iter=200):
                     ok = True
                     break
                 for attempt in range(2):
-                    step = np.linalg.solve(J, -r)
+                    try:
+                        step = np.linalg.solve(J, -r)
+                    except np.linalg.LinAlgError:
+                        raise DriverError(f"step {k}: the secant tangent of the free components "
+                                          f"became singular at strain {cur.tolist()} (a material "
+                                          "damaged through cannot hold them at zero stress)") from None
                     t = 1.0
                     for _ in range(20):
                         rn = resid(x + t * step)
@@ -157,6 +162,9 @@ def drive_strain_path(material, eps, h=None):
     eps = np.asarray(eps, dtype=np.float64)
     if eps.ndim != 3 or eps.shape[1:] != (3, 3):
         raise MaterialError(f"eps must have shape (n, 3, 3), got {eps.shape}")
+    if not np.all(np.isfinite(eps)):
+        i = int(np.argmax(~np.isfinite(eps).all(axis=(1, 2))))
+        raise MaterialError(f"eps[{i}] is not finite: {eps[i].tolist()}")
     if not np.allclose(eps, eps.transpose(0, 2, 1)):
         raise MaterialError("eps must be symmetric")
     v = np.stack([eps[:, 0, 0], eps[:, 1, 1], eps[:, 2, 2],

@@ -77,6 +77,9 @@ def energy_per_cycle(history, key, rows=None, force=None):
         if k not in history:
             raise PostprocessError(f"energy_per_cycle: no history column {k!r}")
     sel = np.ones(len(history[key]), bool) if rows is None else np.asarray(rows, bool)
+    if sel.shape != (len(history[key]),):
+        raise PostprocessError(f"energy_per_cycle: rows has shape {sel.shape}, the history has "
+                               f"{len(history[key])} rows")
     u = np.asarray(history[key])[sel]
     cum = {k: np.asarray(history[k])[sel] for k in ("D_blocks", "D_joints", "W_ext")}
     f = np.asarray(history[force])[sel] if force is not None else None

@@ -1,0 +1,170 @@
+"""Bad input gets a clear error naming the parameter, id, value or file: never a traceback of an
+internal error, a NaN-filled result or a silent clamp. One test per entry point: solver options,
+stages and controls, load patterns, the model and simulation API, result files and checkpoints,
+output folders and the scene scripts' parameters (through ``dr-masonry run``)."""
+import shutil
+
+import h5py
+import numpy as np
+import pytest
+
+from dr_masonry import (BodyForce, Displacement, Force, Gravity, JointLaw, Load, Model,
+                        PlasticDamage, Simulation, SolverOptions, Stage)
+from dr_masonry.cli import main
+from dr_masonry.loading import Combined, LoadingError, PointLoad, Pressure
+from dr_masonry.model import ModelError
+from dr_masonry.results import ResultsError, make_folder, open_result
+from dr_masonry.solver import OptionsError
+from test_results import write_fake_result
+
+MAT = PlasticDamage.elastic(10e9, 0.2, 2000.0)
+
+
+@pytest.mark.parametrize("field, value, msg", [
+    ("tol", -1.0, r"tol=-1.0: must be a finite number > 0"),
+    ("tol", "1e-4", r"tol='1e-4'"),
+    ("tol", float("nan"), r"tol=nan"),
+    ("max_iter", 2.5, r"max_iter=2.5: must be an integer >= 1"),   # hung in the relaxation
+    ("max_iter", 0, r"max_iter=0"),
+    ("stall_iter", 2.5, r"stall_iter=2.5: must be an integer >= 0"),
+    ("max_cuts", True, r"max_cuts=True"),
+    ("alpha", "x", r"alpha='x'"),                                   # was a Numba TypingError
+    ("alpha", -1.0, r"alpha=-1.0: must be a finite number > 0"),
+    ("predictor", "no", r"predictor='no': must be True or False"),  # counted as True
+    ("coarse", 1, r"coarse=1: must be True, False or 'auto'"),
+    ("damping", "viscus", r"damping='viscus': valid values are"),
+    ("floor_tol", 1e-5, r"floor_tol=1e-05: must be a finite number 0 \(off\) or >= tol"),
+])
+def test_solver_options_name_the_field(field, value, msg):
+    with pytest.raises(OptionsError, match=msg):
+        SolverOptions(**{field: value})
+    with pytest.raises(OptionsError, match=r"alpha=1.0: must be a finite number in \[0, 1\)"):
+        SolverOptions(damping="local", alpha=1.0)
+
+
+def test_stages_controls_and_patterns_are_checked_when_made():
+    bad = [
+        (lambda: Stage("s", 0), r"stage 's': increments=0 must be an integer >= 1"),
+        (lambda: Stage("s", 2.5), r"increments=2.5"),                # was truncated to 2
+        (lambda: Stage("s", 2, frames=0), r"frames=0"),              # ZeroDivisionError
+        (lambda: Stage("s", 2, max_iter=0), r"max_iter=0"),          # fell back to the option
+        (lambda: Stage("s", 2, tol=float("nan")), r"tol=nan"),
+        (lambda: Stage("s", 2, controls=None), r"controls must be a list"),
+        (lambda: Stage("s", 2, controls=["x"]), r"controls must be a list"),
+        (lambda: Displacement(to="abc", target=None), r"to='abc' must be a finite number"),
+        (lambda: Load(pattern=None, to=1.0), r"pattern must be one of"),
+        (lambda: Gravity(g=float("nan")), r"g=nan must be a finite number"),
+        (lambda: BodyForce((np.nan, 0, 0)), r"accel: .* must be 3 finite numbers"),
+        (lambda: BodyForce((1.0, 0)), r"must be 3 finite numbers"),
+        (lambda: PointLoad(None, "x", value=np.inf), r"value=inf"),
+        (lambda: Combined([(Gravity(), np.nan)]), r"\(pattern, finite weight\) pairs"),
+        (lambda: Pressure(np.zeros((1, 3), int)), r"quads must be an \(m, 4\) array"),
+    ]
+    for make, msg in bad:
+        with pytest.raises(LoadingError, match=msg):
+            make()
+    with pytest.raises(LoadingError, match=r"path: 'ab' is not a list of numbers"):
+        Displacement(path="ab", target=None)
+
+
+def _sim():
+    m = Model()
+    m.set_joint_law(JointLaw.dry(0.5))
+    base = m.add_box((0, 0, 0), (0.2, 0.1, 0.1), MAT, (2, 1, 1), fixed=True)
+    top = m.add_box((0, 0, 0.1), (0.2, 0.1, 0.1), MAT, (2, 1, 1))
+    return m, Simulation(m), base, top
+
+
+def test_model_and_simulation_ids_are_checked():
+    m, sim, base, top = _sim()
+    n = m.n_nodes
+    for ids in ([7], [-1]):                       # -1 was silently the last block
+        with pytest.raises(ModelError, match=rf"block_nodes: block: id {ids[0]} is not an integer in \[0, 2\)"):
+            m.block_nodes(ids)
+    with pytest.raises(ModelError, match=r"block_face: face: id 9"):
+        m.block_face(0, 9)
+    with pytest.raises(ModelError, match=r"divisions must be three integers >= 1, got \(2.5, 1, 1\)"):
+        m.add_box((1, 0, 0), (0.2, 0.1, 0.1), MAT, (2.5, 1, 1))
+    with pytest.raises(ModelError, match=r"fixed must be True or False, got 'no'"):
+        m.add_box((1, 0, 0), (0.2, 0.1, 0.1), MAT, fixed="no")   # a non-empty string was True
+    for ids, msg in (([n], rf"id {n} is not an integer in \[0, {n}\)"), ([-1], r"id -1"),
+                     ([1.7], r"id 1.7"), ([], r"no nodes given")):
+        with pytest.raises(LoadingError, match=msg):
+            sim.fix(ids)
+    with pytest.raises(LoadingError, match=r"rigid point 'p': position: .* 3 finite numbers"):
+        sim.rigid_point("p", blocks=[top], position=(np.nan, 0, 0))
+    with pytest.raises(ModelError, match=r"block_nodes: block: id 99"):
+        sim.rigid_point("q", blocks=[99])
+    # what the model holds but the solver cannot use: named when the simulation is made
+    m2 = Model()
+    m2.set_joint_law("reference")
+    m2.add_box((0, 0, 0), (0.2, 0.1, 0.1), MAT)
+    with pytest.raises(ModelError, match=r"the default joint law must be a JointLaw, got 'reference'"):
+        Simulation(m2)
+    m3 = Model()
+    m3.add_box((0, 0, 0), (0.2, 0.1, 0.1), JointLaw.reference())
+    with pytest.raises(ModelError, match=r"block 0: material must be a PlasticDamage, got JointLaw"):
+        Simulation(m3)
+    with pytest.raises(OptionsError, match=r"options must be a SolverOptions, got str"):
+        Simulation(m, options="fast")
+
+
+def test_controls_on_one_dof_and_bad_pressure_quads_are_refused_at_run():
+    m, sim, base, top = _sim()
+    rp = sim.rigid_point("top", blocks=[top])
+    two = Stage("s", 1, [Displacement(target=rp, dof="x", to=1e-4),
+                         Force(target=rp, dof="x", to=10.0)])    # the last one used to win
+    with pytest.raises(LoadingError, match=r"stage 's': controls Displacement and Force both act "
+                                           r"on DOF 0 of 'top'"):
+        sim.run([two])
+    far = Stage("p", 1, [Load(pattern=Pressure(np.array([[0, 1, 2, 10**6]])), to=1.0)])
+    with pytest.raises(LoadingError, match=r"node id 1000000 in quads, the model has 24 nodes"):
+        sim.run([far])
+
+
+def test_result_files_missing_parts_and_damaged_checkpoints_are_named(tmp_path):
+    p = tmp_path / "r.h5"
+    write_fake_result(p)
+    for group in ("history", "frames", "model/nodes"):
+        q = tmp_path / (group.replace("/", "_") + ".h5")
+        shutil.copy(p, q)
+        with h5py.File(q, "a") as f:
+            del f[group]
+        with pytest.raises(ResultsError, match=rf"is damaged: it lacks {group}"):
+            open_result(q)
+        assert main(["info", str(q)]) == 2 and main(["vtk", str(q)]) == 2
+    (tmp_path / "dir.h5").mkdir()
+    with pytest.raises(ResultsError, match=r"is a directory"):
+        open_result(tmp_path / "dir.h5")
+    with pytest.raises(ResultsError, match=r"cannot create the output folder .*file\.txt"):
+        (tmp_path / "file.txt").write_text("")
+        make_folder(str(tmp_path / "file.txt"))
+    assert main(["vtk", str(p), str(tmp_path / "vtk"), "--warp", "nan"]) == 2
+
+
+@pytest.mark.filterwarnings("ignore:increment 2:RuntimeWarning")   # two large push steps
+def test_scene_parameters_and_resume_are_checked(tmp_path, capsys):
+    """Through ``dr-masonry run``: exit status 2 and one line naming the parameter."""
+    out = str(tmp_path / "w")
+    cases = [
+        (["run", "couplet", "tol=-1"], "SolverOptions.tol=-1.0"),        # was a traceback
+        (["run", "squat_wall", "fast=true", "height=0"], "parameter height=0.0"),  # was 1 course
+        (["run", "squat_wall", "fast=true", "out="], "parameter out=''"),
+        (["run", "triplet", "sigmas=-0.2"], "parameter sigmas=(-0.2,)"),  # tension: ran away
+        (["run", "triplet", "sigmas="], "at least one pre-compression"),
+        (["run", "joint", "steps=0"], "parameter steps=0"),               # wrote empty CSVs
+        (["run", "joint", "sigmas_MPa=abc"], "parameter sigmas_MPa='abc'"),
+        (["run", "squat_wall", "fast=true", f"out={tmp_path}/f.txt/w"], "cannot create"),
+    ]
+    (tmp_path / "f.txt").write_text("")
+    for argv, msg in cases:
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert msg in err and "Traceback" not in err, (argv, err)
+    # a complete run is not run again by resume=true
+    args = ["run", "squat_wall", "fast=true", "increments=2", "pre_increments=1", f"out={out}"]
+    assert main(args) == 0
+    rows = open_result(out + ".h5").history["increment"].size
+    assert main(args + ["resume=true"]) == 2
+    assert "is complete (3 rows" in capsys.readouterr().err
+    assert open_result(out + ".h5").history["increment"].size == rows == 3
