@@ -168,3 +168,27 @@ def test_scene_parameters_and_resume_are_checked(tmp_path, capsys):
     assert main(args + ["resume=true"]) == 2
     assert "is complete (3 rows" in capsys.readouterr().err
     assert open_result(out + ".h5").history["increment"].size == rows == 3
+
+
+@pytest.mark.parametrize("damage, msg", [
+    (lambda g: g.__delitem__("U"), r"checkpoint of .* is damaged: it lacks U"),
+    (lambda g: g["s_joints"].__setitem__((0, 0), np.nan), r"s_joints holds 1 non-finite values"),
+    (lambda g: g["contacts/master"].__setitem__((0, 0), 10**6),
+     r"contacts/master: indices outside \[0, 24\)"),
+])
+def test_a_damaged_checkpoint_is_named_on_resume(tmp_path, damage, msg):
+    """A NaN in the checkpoint used to stop the continued run as an 'unstable time step', a
+    missing array as a KeyError and an out-of-range contact as a numpy error."""
+    path = str(tmp_path / "run.h5")
+
+    def setup(output):
+        m, _, base, top = _sim()
+        return Simulation(m, SolverOptions(tol=1e-6), output=output)
+    stages = [Stage("gravity", 2, [Load(pattern=Gravity(), to=1.0)])]
+    sim = setup(path)
+    sim.run(stages)
+    sim.close()
+    with h5py.File(path, "a") as f:
+        damage(f["checkpoint"])
+    with pytest.raises(ResultsError, match=msg):
+        setup(path).resume(path)
