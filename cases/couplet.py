@@ -15,7 +15,7 @@ import numpy as np
 
 from dr_masonry import Displacement, JointLaw, Model, PlasticDamage, Simulation, Stage
 from dr_masonry.cli import run_script
-from dr_masonry.params import parse_overrides
+from dr_masonry.params import ParameterError, output_path, parse_overrides
 from dr_masonry.scene import finish, solver_options
 from dr_masonry.units import MPa, mm
 
@@ -49,6 +49,8 @@ def build(params):
     rp = sim.rigid_point("platen", nodes=platen)
     holds = [Displacement(target=rp, dof=d, to=0.0) for d in ("x", "y", "rx", "ry", "rz")]
     # cubic spacing: the peak (a few micrometres) is resolved as well as the long softening tail
+    if not (np.isfinite(params["u_max"]) and params["u_max"] > 0):
+        raise ParameterError(f"parameter u_max={params['u_max']!r}: must be an opening > 0 m")
     t = np.arange(1, params["increments"] + 1) / params["increments"]
     pull = Displacement(target=rp, dof="z", path=params["u_max"] * t ** 3, name="pull")
     stages = [Stage("tension", params["increments"], holds + [pull])]
@@ -73,7 +75,7 @@ def run(params):
 def main(argv=None):
     params = parse_overrides(PARAMS, sys.argv[1:] if argv is None else argv, __doc__)
     params["progress"] = True
-    params["h5"] = params["out"] + ".h5"
+    params["h5"] = output_path(params) + ".h5"
     sim, hist = run(params)
     u = hist["platen.uz"]
     s = hist["platen.fz"] / (L * T)

@@ -26,7 +26,7 @@ import numpy as np
 from dr_masonry.cli import run_script
 from dr_masonry.drivers_joint import drive_joint
 from dr_masonry.materials.joint import JointLaw
-from dr_masonry.params import ParameterError, parse_overrides
+from dr_masonry.params import ParameterError, output_path, parse_overrides
 from dr_masonry.results import make_folder
 from dr_masonry.units import MPa, mm
 
@@ -161,6 +161,7 @@ def run(params, out):
 def check(params):
     """Raise :class:`ParameterError` naming the first parameter with a value the scene cannot
     drive (``steps`` an integer >= 2, amplitudes > 0, stresses finite and <= 0)."""
+    output_path(params)
     if params["shear_damage"] not in ("calibrated", "paper"):
         raise ParameterError(f"parameter shear_damage={params['shear_damage']!r}: valid values "
                              "are 'calibrated', 'paper'")

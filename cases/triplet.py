@@ -18,7 +18,7 @@ from dr_masonry import (Displacement, Force, JointLaw, Model, PlasticDamage, Sim
                         Stage)
 from dr_masonry.cli import run_script
 from dr_masonry.geometry import plane_nodes
-from dr_masonry.params import ParameterError, parse_overrides
+from dr_masonry.params import ParameterError, output_path, parse_overrides
 from dr_masonry.scene import finish, solver_options
 from dr_masonry.units import MPa, mm
 
@@ -71,6 +71,7 @@ def run(params, sigma):
 
 def check(params):
     """Raise :class:`ParameterError` naming the first parameter the scene cannot run with."""
+    output_path(params)
     if not params["sigmas"] or not all(np.isfinite(v) and v > 0 for v in params["sigmas"]):
         raise ParameterError(f"parameter sigmas={params['sigmas']!r}: at least one pre-compression,"
                              " each finite and > 0 MPa")

@@ -69,7 +69,13 @@ def drive_mixed(material, eps, free, h=None, tol=1e-8, max_iter=200):
     eps = np.array(eps, dtype=np.float64)
     if eps.ndim != 2 or eps.shape[1] != 6 or not np.all(np.isfinite(eps)):
         raise MaterialError(f"eps must be a finite (n, 6) array, got shape {eps.shape}")
-    free = np.asarray(free, dtype=bool)
+    free = np.asarray(free)
+    if free.shape != (6,) or free.dtype != bool:
+        raise MaterialError(f"free must be a (6,) bool array, got {free!r}")
+    if not (isinstance(tol, float) and 0 < tol < 1):
+        raise MaterialError(f"tol={tol!r} must be a float in (0, 1)")
+    if not (isinstance(max_iter, (int, np.integer)) and max_iter >= 1):
+        raise MaterialError(f"max_iter={max_iter!r} must be an integer >= 1")
     h = _h(material, h)
     p = material.params_array()
     n = eps.shape[0]

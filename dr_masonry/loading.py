@@ -41,9 +41,13 @@ def _vector(what, x, n=None):
         a = np.asarray(x, dtype=np.float64)
     except (TypeError, ValueError):
         raise LoadingError(f"{what}: {x!r} is not a list of numbers") from None
-    if a.ndim > 1 or (n is not None and a.size != n) or not np.all(np.isfinite(a)):
+    if a.ndim > 1 or (n is not None and a.size != n):
         raise LoadingError(f"{what}: {x!r} must be {n or 'a list of'} finite numbers")
-    return a.ravel()
+    a = a.ravel()
+    if not np.all(np.isfinite(a)):
+        k = int(np.argmax(~np.isfinite(a)))
+        raise LoadingError(f"{what}: value {k} of {a.size} is {a[k]} (must be finite)")
+    return a
 
 
 def dof_index(dof, rotations=True):
@@ -125,6 +129,9 @@ class PointLoad:
         if not _number(self.value):
             raise LoadingError(f"PointLoad {self.name!r}: value={self.value!r} must be a finite "
                                "number (N)")
+        if not isinstance(self.target, (RigidPoint, NodeSet)):
+            raise LoadingError(f"PointLoad {self.name!r}: target must be a RigidPoint or NodeSet, "
+                               f"got {self.target!r}")
 
 
 @dataclass(eq=False)
@@ -164,6 +171,8 @@ class _Control:
         if self.to is not None and not _number(self.to):
             raise LoadingError(f"control {self.label}: to={self.to!r} must be a finite number")
         if self.path is not None:
+            if self.to is not None:
+                raise LoadingError(f"control {self.label}: give to or path, not both")
             self.path = _vector(f"control {self.label}: path", self.path)
         if hasattr(self, "target") and not isinstance(self.target, (RigidPoint, NodeSet)):
             raise LoadingError(f"control {self.label}: target must be a RigidPoint or NodeSet "
@@ -242,6 +251,8 @@ class Stage:
                     and v >= low):
                 raise LoadingError(f"stage {self.name!r}: {key}={v!r} must be an integer >= {low}")
         self.increments = int(self.increments)
+        self.frames = int(self.frames)
+        self.max_iter = None if self.max_iter is None else int(self.max_iter)
         if self.tol is not None and not (_number(self.tol) and self.tol > 0):
             raise LoadingError(f"stage {self.name!r}: tol={self.tol!r} must be a finite number > 0")
         if not isinstance(self.controls, (list, tuple)) or not all(isinstance(c, _Control)

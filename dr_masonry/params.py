@@ -1,7 +1,7 @@
 """Scene parameters: ``key=value`` overrides of a case's PARAMS defaults, checked and typed."""
 import ast
 import json
-
+import os
 import sys
 
 _TRUE = {"1", "true", "yes", "on"}
@@ -48,6 +48,16 @@ def _coerce(key, text, default):
     except (ValueError, json.JSONDecodeError) as e:
         raise ParameterError(f"parameter {key}={text!r}: cannot convert to "
                          f"{type(default).__name__} like the default {default!r} ({e})") from None
+
+
+def output_path(params, key="out"):
+    """``params[key]``, the path stem of a scene's outputs (``out.h5``, ``out.png``, ...), after
+    checking that it names a file: not blank, not a folder (ending in a separator)."""
+    out = str(params[key])
+    if not out.strip() or out.endswith(("/", os.sep)):
+        raise ParameterError(f"parameter {key}={params[key]!r}: must name the results' path stem "
+                             "(e.g. results/wall: results/wall.h5, .png, .csv, _vtk/)")
+    return out
 
 
 def format_params(params):

@@ -512,6 +512,12 @@ class Result:
             self.model_arrays = {k: m[k][()] for k in m if isinstance(m[k], h5py.Dataset)}
             self.model_arrays["contacts"] = (
                 {k: v[()] for k, v in m["contacts"].items()} if "contacts" in m else None)
+            a = self.model_arrays
+            nn = a["nodes"].shape[0]
+            if not np.all(np.isfinite(a["nodes"])) or a["elements"].size and (
+                    a["elements"].min() < 0 or a["elements"].max() >= nn):
+                raise ResultsError(f"results file {self.path!r} is damaged: model/nodes not "
+                                   f"finite or model/elements outside [0, {nn})")
             self.group_names = json.loads(m.attrs["group_names"])
             self.materials = json.loads(m.attrs["materials"])
             self.joint_laws = json.loads(m.attrs["joint_laws"])
@@ -570,7 +576,7 @@ class Result:
         with h5py.File(self.path, "r") as f:
             if CHECKPOINT not in f and CHECKPOINT_NEW not in f:
                 return False
-            return ends_run(json.loads(self._checkpoint_group(f).attrs["meta"]).get("stage"))
+            return ends_run(self._meta(self._checkpoint_group(f)).get("stage"))
 
     def checkpoint(self):
         """(increment, arrays dict, meta dict) of the last checkpoint; ResultsError if none."""
@@ -579,7 +585,18 @@ class Result:
             arrays = {}
             g.visititems(lambda k, v: arrays.__setitem__(k, v[()])
                          if isinstance(v, h5py.Dataset) else None)
-            return int(g.attrs["increment"]), arrays, json.loads(g.attrs["meta"])
+            return int(g.attrs["increment"]), arrays, self._meta(g)
+
+    def _meta(self, g):
+        """The JSON attribute ``meta`` of checkpoint group ``g``; ResultsError if damaged."""
+        try:
+            meta = json.loads(g.attrs["meta"])
+            if isinstance(meta, dict):
+                return meta
+        except (KeyError, ValueError):
+            pass
+        raise ResultsError(f"checkpoint of {self.path} is damaged: its attribute meta is missing "
+                           "or not a JSON object")
 
     def frame(self, i):
         """Fields of frame ``i`` (position in :attr:`frame_ids`, negative counts from the end), or
@@ -589,7 +606,12 @@ class Result:
             return self._checkpoint_fields()
         with h5py.File(self.path, "r") as f:
             g = self._frame_group(f, i)
-            return {k: v[()] for k, v in g.items() if isinstance(v, h5py.Dataset)}
+            fields = {k: v[()] for k, v in g.items() if isinstance(v, h5py.Dataset)}
+        bad = [k for k, v in fields.items() if v.dtype.kind == "f" and not np.all(np.isfinite(v))]
+        if bad:
+            raise ResultsError(f"results file {self.path!r} is damaged: frame {i} field "
+                               f"{bad[0]} holds non-finite values")
+        return fields
 
     def frame_increment(self, i):
         """Increment of frame ``i`` (or of the last checkpoint: ``i = "checkpoint"``)."""

@@ -4,7 +4,7 @@ import os
 
 import numpy as np
 
-from .params import ParameterError, parse_overrides
+from .params import ParameterError, output_path, parse_overrides
 from .results import make_folder
 from .solver import SolverError
 
@@ -15,10 +15,7 @@ def scene_params(defaults, fast, argv, doc):
     params = parse_overrides(defaults, argv, doc)
     if params["fast"]:                  # the preset first, explicit overrides on top
         params = parse_overrides(dict(defaults, **fast), argv, doc)
-    if not str(params["out"]).strip():
-        raise ParameterError(f"parameter out={params['out']!r}: must name the results' path "
-                             "(without .h5: out.h5, out.png, out.csv, out_vtk/)")
-    params["h5"] = params["out"] + ".h5"
+    params["h5"] = output_path(params) + ".h5"
     params["progress"] = True
     return params
 

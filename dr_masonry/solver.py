@@ -212,7 +212,7 @@ class SolverOptions:
     progress: bool = False
 
     def __post_init__(self):
-        if self.damping not in DAMPING:
+        if not isinstance(self.damping, str) or self.damping not in DAMPING:
             raise OptionsError(f"SolverOptions.damping={self.damping!r}: valid values are "
                                f"{list(DAMPING)}")
         if self.alpha is None:
@@ -221,7 +221,7 @@ class SolverOptions:
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise OptionsError(f"SolverOptions.{name}={getattr(self, name)!r}: must be True or "
                                    "False")
-        if not (isinstance(self.coarse, (bool, np.bool_)) or self.coarse == "auto"):
+        if not (isinstance(self.coarse, (bool, np.bool_)) or (isinstance(self.coarse, str) and self.coarse == "auto")):
             raise OptionsError(f"SolverOptions.coarse={self.coarse!r}: must be True, False or "
                                "'auto'")
         for name, low in (("max_iter", 1), ("check_every", 1), ("coarse_every", 1),
@@ -344,6 +344,8 @@ class Simulation:
     def fix(self, nodes, dofs="xyz"):
         """Clamp DOFs (any of 'x', 'y', 'z') of the given nodes (supports, symmetry planes)."""
         nodes = self._nodes("fix", nodes)
+        if not (isinstance(dofs, str) and dofs):
+            raise L.LoadingError(f"fix: dofs={dofs!r} must be a string of 'x', 'y', 'z'")
         for d in dofs:
             self._fixed[nodes, L.dof_index(d, rotations=False)] = True
 
@@ -363,9 +365,9 @@ class Simulation:
         if self._built:
             raise L.LoadingError("rigid points must be created before the first run")
         self._check_name(name)
+        if (nodes is None) == (blocks is None):
+            raise L.LoadingError(f"rigid point {name!r}: give blocks or nodes (one of them)")
         if nodes is None:
-            if blocks is None:
-                raise L.LoadingError(f"rigid point {name!r}: give blocks or nodes")
             nodes = self.model.block_nodes(blocks)
         nodes = self._nodes(f"rigid point {name!r}", nodes)
         for rp in self.rigid_points:
@@ -675,6 +677,10 @@ class Simulation:
         After :meth:`resume`, ``stages`` must be the original run's stages: those finished before
         the checkpoint are skipped and the stage in progress continues where it stopped.
         """
+        if not (isinstance(stages, (list, tuple)) and stages
+                and all(isinstance(s, L.Stage) for s in stages)):
+            raise L.LoadingError(f"Simulation.run: stages must be a non-empty list of Stage, got "
+                                 f"{stages!r}")
         if not self._built:
             self.build()
         ensure_compiled(self.mesh, self.cont, self.dyn)

@@ -207,10 +207,11 @@ class PlasticDamage:
 
     def with_changes(self, **kw):
         """A copy with some parameters changed (validated again)."""
-        unknown = set(kw) - {f.name for f in fields(self)}
+        valid = [f.name for f in fields(self) if f.init]
+        unknown = set(kw) - set(valid)
         if unknown:
             raise MaterialError(f"PlasticDamage.with_changes: unknown fields {sorted(unknown)}; "
-                                f"valid: {[f.name for f in fields(self)]}")
+                                f"valid: {valid}")
         return replace(self, **kw)
 
     # ------------------------------------------------------------------ kernel data
