@@ -54,11 +54,14 @@ def test_stages_controls_and_patterns_are_checked_when_made():
         (lambda: Displacement(to="abc", target=None), r"to='abc' must be a finite number"),
         (lambda: Load(pattern=None, to=1.0), r"pattern must be one of"),
         (lambda: Gravity(g=float("nan")), r"g=nan must be a finite number"),
-        (lambda: BodyForce((np.nan, 0, 0)), r"accel: .* must be 3 finite numbers"),
+        (lambda: BodyForce((np.nan, 0, 0)), r"accel: value 0 of 3 is nan"),
         (lambda: BodyForce((1.0, 0)), r"must be 3 finite numbers"),
         (lambda: PointLoad(None, "x", value=np.inf), r"value=inf"),
         (lambda: Combined([(Gravity(), np.nan)]), r"\(pattern, finite weight\) pairs"),
         (lambda: Pressure(np.zeros((1, 3), int)), r"quads must be an \(m, 4\) array"),
+        (lambda: PointLoad(-1, "x"), r"PointLoad 'point': target must be a RigidPoint"),
+        (lambda: Displacement(to=1.0, path=[1.0], target=None), r"give to or path, not both"),
+        (lambda: Displacement(path=[0.0, np.nan], target=None), r"path: value 1 of 2 is nan"),
     ]
     for make, msg in bad:
         with pytest.raises(LoadingError, match=msg):
@@ -91,7 +94,7 @@ def test_model_and_simulation_ids_are_checked():
                      ([1.7], r"id 1.7"), ([], r"no nodes given")):
         with pytest.raises(LoadingError, match=msg):
             sim.fix(ids)
-    with pytest.raises(LoadingError, match=r"rigid point 'p': position: .* 3 finite numbers"):
+    with pytest.raises(LoadingError, match=r"rigid point 'p': position: value 0 of 3 is nan"):
         sim.rigid_point("p", blocks=[top], position=(np.nan, 0, 0))
     with pytest.raises(ModelError, match=r"block_nodes: block: id 99"):
         sim.rigid_point("q", blocks=[99])
@@ -107,6 +110,12 @@ def test_model_and_simulation_ids_are_checked():
         Simulation(m3)
     with pytest.raises(OptionsError, match=r"options must be a SolverOptions, got str"):
         Simulation(m, options="fast")
+    with pytest.raises(LoadingError, match=r"give blocks or nodes \(one of them\)"):
+        sim.rigid_point("r", blocks=[top], nodes=[0])       # the blocks were ignored
+    with pytest.raises(LoadingError, match=r"fix: dofs='' must be a string"):
+        sim.fix([0], dofs="")
+    with pytest.raises(LoadingError, match=r"stages must be a non-empty list of Stage"):
+        sim.run([])                                         # was KeyError: 'increment'
 
 
 def test_controls_on_one_dof_and_bad_pressure_quads_are_refused_at_run():
@@ -140,6 +149,13 @@ def test_result_files_missing_parts_and_damaged_checkpoints_are_named(tmp_path):
         (tmp_path / "file.txt").write_text("")
         make_folder(str(tmp_path / "file.txt"))
     assert main(["vtk", str(p), str(tmp_path / "vtk"), "--warp", "nan"]) == 2
+    q = tmp_path / "nan.h5"              # a NaN in a frame was written to the VTK points
+    shutil.copy(p, q)
+    with h5py.File(q, "a") as f:
+        f["frames/000002/U"][0, 0] = np.nan
+    with pytest.raises(ResultsError, match=r"frame 1 field U holds non-finite values"):
+        open_result(q).frame(1)
+    assert main(["vtk", str(q), str(tmp_path / "vtk2")]) == 2
 
 
 @pytest.mark.filterwarnings("ignore:increment 2:RuntimeWarning")   # two large push steps
@@ -150,6 +166,9 @@ def test_scene_parameters_and_resume_are_checked(tmp_path, capsys):
         (["run", "couplet", "tol=-1"], "SolverOptions.tol=-1.0"),        # was a traceback
         (["run", "squat_wall", "fast=true", "height=0"], "parameter height=0.0"),  # was 1 course
         (["run", "squat_wall", "fast=true", "out="], "parameter out=''"),
+        (["run", "squat_wall", "fast=true", f"out={tmp_path}/"], "must name the results' path"),
+        (["run", "couplet", "out="], "parameter out=''"),
+        (["run", "squat_wall", "fast=true", "drift=nan"], "the monotonic target"),
         (["run", "triplet", "sigmas=-0.2"], "parameter sigmas=(-0.2,)"),  # tension: ran away
         (["run", "triplet", "sigmas="], "at least one pre-compression"),
         (["run", "joint", "steps=0"], "parameter steps=0"),               # wrote empty CSVs
@@ -175,6 +194,7 @@ def test_scene_parameters_and_resume_are_checked(tmp_path, capsys):
     (lambda g: g["s_joints"].__setitem__((0, 0), np.nan), r"s_joints holds 1 non-finite values"),
     (lambda g: g["contacts/master"].__setitem__((0, 0), 10**6),
      r"contacts/master: indices outside \[0, 24\)"),
+    (lambda g: g.attrs.__delitem__("meta"), r"its attribute meta is missing"),
 ])
 def test_a_damaged_checkpoint_is_named_on_resume(tmp_path, damage, msg):
     """A NaN in the checkpoint used to stop the continued run as an 'unstable time step', a
