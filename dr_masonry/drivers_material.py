@@ -115,9 +115,10 @@ def drive_mixed(material, eps, free, h=None, tol=1e-8, max_iter=200):
                     try:
                         step = np.linalg.solve(J, -r)
                     except np.linalg.LinAlgError:
-                        raise DriverError(f"step {k}: the secant tangent of the free components "
-                                          f"became singular at strain {cur.tolist()} (a material "
-                                          "damaged through cannot hold them at zero stress)") from None
+                        raise DriverError(
+                            f"step {k}: the secant tangent of the free components became singular "
+                            f"at strain {cur.tolist()} (a material damaged through cannot hold "
+                            "them at zero stress)") from None
                     t = 1.0
                     for _ in range(20):
                         rn = resid(x + t * step)

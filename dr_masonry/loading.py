@@ -31,8 +31,8 @@ class LoadingError(ValueError):
 
 def _number(x):
     """Whether ``x`` is a finite real number (not a bool)."""
-    return (isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, (bool, np.bool_))
-            and bool(np.isfinite(x)))
+    return (isinstance(x, (int, float, np.integer, np.floating))
+            and not isinstance(x, (bool, np.bool_)) and bool(np.isfinite(x)))
 
 
 def _vector(what, x, n=None):
@@ -86,7 +86,8 @@ class Gravity:
 
     def __post_init__(self):
         if not _number(self.g):
-            raise LoadingError(f"Gravity {self.name!r}: g={self.g!r} must be a finite number (m/s^2)")
+            raise LoadingError(f"Gravity {self.name!r}: g={self.g!r} must be a finite number "
+                               "(m/s^2)")
 
 
 @dataclass(eq=False)
@@ -150,10 +151,10 @@ class Combined:
 
     def __post_init__(self):
         for part in self.parts:
-            if not (isinstance(part, (tuple, list)) and len(part) == 2 and isinstance(part[0], PATTERNS)
-                    and _number(part[1])):
-                raise LoadingError(f"Combined {self.name!r}: parts must be (pattern, finite weight) "
-                                   f"pairs, got {part!r}")
+            if not (isinstance(part, (tuple, list)) and len(part) == 2
+                    and isinstance(part[0], PATTERNS) and _number(part[1])):
+                raise LoadingError(f"Combined {self.name!r}: parts must be (pattern, finite "
+                                   f"weight) pairs, got {part!r}")
 
 
 #: the load pattern types a :class:`Load`, :class:`Indirect` or :class:`Combined` takes

@@ -26,8 +26,8 @@ from .kernels.joint_law import JS_D, JS_DISS, JS_DISSF
 from .kernels.plastic_damage import MP_HMAX, MS_DC, MS_DISS, MS_DT
 from .materials import JointLaw, PlasticDamage
 from .model import ModelError, id_array
-from .results import ResultsError, ends_run
 from .precompile import ensure_compiled
+from .results import ResultsError, ends_run
 
 #: energies of an increment at its current state (:meth:`Simulation._energies`)
 Energies = namedtuple("Energies", "stored f_tot dw ratio diss element_diss joint_diss")
@@ -221,7 +221,8 @@ class SolverOptions:
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise OptionsError(f"SolverOptions.{name}={getattr(self, name)!r}: must be True or "
                                    "False")
-        if not (isinstance(self.coarse, (bool, np.bool_)) or (isinstance(self.coarse, str) and self.coarse == "auto")):
+        if not (isinstance(self.coarse, (bool, np.bool_))
+                or isinstance(self.coarse, str) and self.coarse == "auto"):
             raise OptionsError(f"SolverOptions.coarse={self.coarse!r}: must be True, False or "
                                "'auto'")
         for name, low in (("max_iter", 1), ("check_every", 1), ("coarse_every", 1),
@@ -234,7 +235,8 @@ class SolverOptions:
                 ("tol", lambda v: v > 0, "> 0"),
                 ("safety", lambda v: v >= 1.0, ">= 1 for a stable step"),
                 ("energy_tol", lambda v: v > 0, "> 0"),
-                ("floor_tol", lambda v: v == 0.0 or v >= self.tol, f"0 (off) or >= tol = {self.tol}"),
+                ("floor_tol", lambda v: v == 0.0 or v >= self.tol,
+                 f"0 (off) or >= tol = {self.tol}"),
                 ("ring", lambda v: 0.0 <= v < 2.0, "in [0, 2) (0: off)"),
                 ("max_dissipation", lambda v: v >= 0, ">= 0 (0: off)"),
                 ("checkpoint_s", lambda v: v >= 0, ">= 0 s"),
@@ -570,8 +572,8 @@ class Simulation:
         elif isinstance(pat, L.Pressure):
             q = np.asarray(pat.quads, dtype=np.int64)
             if q.size and q.max() >= n:
-                raise L.LoadingError(f"Pressure {pat.name!r}: node id {q.max()} in quads, the model "
-                                     f"has {n} nodes")
+                raise L.LoadingError(f"Pressure {pat.name!r}: node id {q.max()} in quads, the "
+                                     f"model has {n} nodes")
             x = m.nodes[q]
             av = 0.5 * np.cross(x[:, 2] - x[:, 0], x[:, 3] - x[:, 1])  # area vector, outward
             flat = np.flatnonzero(np.linalg.norm(av, axis=1) == 0.0)
@@ -1232,8 +1234,9 @@ class Simulation:
         """Raise a clear error unless the checkpoint ``arrays`` fit this model and are finite."""
         d = self.dyn
         need = {k: getattr(d, k).shape for k in self._STATE}
-        need.update(rp_force=self.rp_force.shape, lam=self.lam.shape, s_blocks=self.mesh.s_old.shape,
-                    s_joints=self.cont.s_old.shape, f_prev=None, du_prev=None)
+        need.update(rp_force=self.rp_force.shape, lam=self.lam.shape,
+                    s_blocks=self.mesh.s_old.shape, s_joints=self.cont.s_old.shape, f_prev=None,
+                    du_prev=None)
         for k, shape in need.items():
             if k not in arrays:
                 raise ResultsError(f"checkpoint of {self.output} is damaged: it lacks {k}")
