@@ -184,18 +184,13 @@ class _Control:
 
     def values(self, start, n):
         """Target values (n,) of this control over a stage of n increments starting at ``start``."""
-        if self.path is not None:
-            p = np.asarray(self.path, dtype=np.float64).ravel()
-            if p.size != n:
-                raise LoadingError(f"control {self.label}: path has {p.size} values, stage has {n} "
-                                   f"increments")
-            if not np.all(np.isfinite(p)):
-                raise LoadingError(f"control {self.label}: path contains NaN or Inf")
-            return p
+        if self.path is not None:   # finite, checked when the control was made
+            if self.path.size != n:
+                raise LoadingError(f"control {self.label}: path has {self.path.size} values, "
+                                   f"stage has {n} increments")
+            return self.path
         if self.to is None:
             return np.full(n, start)
-        if not np.isfinite(self.to):
-            raise LoadingError(f"control {self.label}: target {self.to} is not finite")
         return start + (self.to - start) * np.arange(1, n + 1) / n
 
     @property
