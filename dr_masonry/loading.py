@@ -29,13 +29,13 @@ class LoadingError(ValueError):
     """Invalid loading input; the message names the control and the value."""
 
 
-def _number(x):
+def is_number(x):
     """Whether ``x`` is a finite real number (not a bool)."""
     return (isinstance(x, (int, float, np.integer, np.floating))
             and not isinstance(x, (bool, np.bool_)) and bool(np.isfinite(x)))
 
 
-def _vector(what, x, n=None):
+def finite_vector(what, x, n=None):
     """``x`` as a finite float64 array (of ``n`` values when given), else LoadingError naming it."""
     try:
         a = np.asarray(x, dtype=np.float64)
@@ -85,7 +85,7 @@ class Gravity:
     name: str = "gravity"
 
     def __post_init__(self):
-        if not _number(self.g):
+        if not is_number(self.g):
             raise LoadingError(f"Gravity {self.name!r}: g={self.g!r} must be a finite number "
                                "(m/s^2)")
 
@@ -101,7 +101,7 @@ class BodyForce:
     name: str = "body"
 
     def __post_init__(self):
-        self.accel = tuple(_vector(f"BodyForce {self.name!r}: accel", self.accel, 3))
+        self.accel = tuple(finite_vector(f"BodyForce {self.name!r}: accel", self.accel, 3))
 
 
 @dataclass(eq=False)
@@ -127,7 +127,7 @@ class PointLoad:
     name: str = "point"
 
     def __post_init__(self):
-        if not _number(self.value):
+        if not is_number(self.value):
             raise LoadingError(f"PointLoad {self.name!r}: value={self.value!r} must be a finite "
                                "number (N)")
         if not isinstance(self.target, (RigidPoint, NodeSet)):
@@ -152,7 +152,7 @@ class Combined:
     def __post_init__(self):
         for part in self.parts:
             if not (isinstance(part, (tuple, list)) and len(part) == 2
-                    and isinstance(part[0], PATTERNS) and _number(part[1])):
+                    and isinstance(part[0], PATTERNS) and is_number(part[1])):
                 raise LoadingError(f"Combined {self.name!r}: parts must be (pattern, finite "
                                    f"weight) pairs, got {part!r}")
 
@@ -169,12 +169,12 @@ class _Control:
     name: str = None
 
     def __post_init__(self):
-        if self.to is not None and not _number(self.to):
+        if self.to is not None and not is_number(self.to):
             raise LoadingError(f"control {self.label}: to={self.to!r} must be a finite number")
         if self.path is not None:
             if self.to is not None:
                 raise LoadingError(f"control {self.label}: give to or path, not both")
-            self.path = _vector(f"control {self.label}: path", self.path)
+            self.path = finite_vector(f"control {self.label}: path", self.path)
         if hasattr(self, "target") and not isinstance(self.target, (RigidPoint, NodeSet)):
             raise LoadingError(f"control {self.label}: target must be a RigidPoint or NodeSet "
                                f"(Simulation.rigid_point, node_set), got {self.target!r}")
@@ -243,13 +243,13 @@ class Stage:
     def __post_init__(self):
         for key, low in (("increments", 1), ("frames", 1), ("max_iter", 1)):
             v = getattr(self, key)
-            if not (v is None and key == "max_iter" or _number(v) and float(v).is_integer()
+            if not (v is None and key == "max_iter" or is_number(v) and float(v).is_integer()
                     and v >= low):
                 raise LoadingError(f"stage {self.name!r}: {key}={v!r} must be an integer >= {low}")
         self.increments = int(self.increments)
         self.frames = int(self.frames)
         self.max_iter = None if self.max_iter is None else int(self.max_iter)
-        if self.tol is not None and not (_number(self.tol) and self.tol > 0):
+        if self.tol is not None and not (is_number(self.tol) and self.tol > 0):
             raise LoadingError(f"stage {self.name!r}: tol={self.tol!r} must be a finite number > 0")
         if not isinstance(self.controls, (list, tuple)) or not all(isinstance(c, _Control)
                                                                     for c in self.controls):

@@ -454,6 +454,23 @@ def make_folder(path):
     return path
 
 
+def check_stored(path, name, value, shape=None, bound=None):
+    """Raise :class:`ResultsError` naming the checkpoint of ``path`` and the array ``name``
+    unless ``value`` is there, has ``shape`` (when given), finite values and, with ``bound``,
+    ids in [0, bound)."""
+    damaged = f"checkpoint of {path} is damaged"
+    if value is None:
+        raise ResultsError(f"{damaged}: it lacks {name}")
+    v = np.asarray(value)
+    if shape is not None and v.shape != shape:
+        raise ResultsError(f"{damaged}: {name} has shape {v.shape}, not {shape}")
+    if v.dtype.kind == "f" and not np.isfinite(v).all():
+        raise ResultsError(f"{damaged}: {name} holds {np.count_nonzero(~np.isfinite(v))} "
+                           "non-finite values")
+    if bound is not None and v.size and (v.min() < 0 or v.max() >= bound):
+        raise ResultsError(f"{damaged}: {name}: indices outside [0, {bound})")
+
+
 def ends_run(position):
     """Whether a checkpoint's stage position ``(stage, increments done, start values, stages,
     increments of the stage)`` (None in older files) is the end of its run."""

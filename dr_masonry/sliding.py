@@ -25,7 +25,7 @@ import numpy as np
 
 from .contact_search import ContactSet, element_edge, local_gaps, project_bilinear, redetect
 from .kernels.joint_law import JS_D, JS_DISS, JS_DISSF, JS_DP1, JS_DP2, JS_G1, JS_G2, JS_GU
-from .results import ResultsError
+from .results import check_stored
 
 #: how far (natural coordinates beyond +-1: 0.1 is 5 % of the quad's edge) a slave node must
 #: have slid out of its quad before its point is re-paired. Nodes that start on the edge between
@@ -176,25 +176,15 @@ class Sliding:
 
     def _check(self, a):
         """Raise :class:`~dr_masonry.results.ResultsError` unless the checkpoint's contact arrays
-        ``a`` (name -> array) have this set's shapes, finite values and valid indices."""
+        ``a`` (name -> array) have this set's shapes, finite values and valid indices
+        (:func:`~dr_masonry.results.check_stored`)."""
         c, m = self.sim.cont, self.sim.model
         ref = {"master": (c.master, m.n_nodes), "xi": (c.xi, None), "gap0": (c.gap0, None),
                "area": (c.area, None), "law": (c.law, len(m.joint_laws)),
                "blocks": (self.blocks, m.n_blocks), "outside0": (self.outside0, None),
                "diss_off": (self.diss_off, None)}
         for k, (arr, bound) in ref.items():
-            v = a.get(k)
-            if v is None:
-                bad = "missing"
-            elif v.shape != arr.shape:
-                bad = f"shape {v.shape}, not {arr.shape}"
-            elif v.dtype.kind == "f" and not np.isfinite(v).all():
-                bad = "non-finite values"
-            elif bound is not None and v.size and (v.min() < 0 or v.max() >= bound):
-                bad = f"indices outside [0, {bound})"
-            else:
-                continue
-            raise ResultsError(f"checkpoint of {self.sim.output} is damaged: contacts/{k}: {bad}")
+            check_stored(self.sim.output, f"contacts/{k}", a.get(k), arr.shape, bound)
 
     def restore(self, arrays):
         """Install the set of a checkpoint written by :meth:`state` (if it holds one)."""

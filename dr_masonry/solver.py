@@ -6,6 +6,7 @@ history variables, energy audit, guards and output (through ``dr_masonry.results
 """
 from __future__ import annotations
 
+import os
 import time
 import warnings
 from collections import namedtuple
@@ -27,7 +28,8 @@ from .kernels.plastic_damage import MP_HMAX, MS_DC, MS_DISS, MS_DT
 from .materials import JointLaw, PlasticDamage
 from .model import ModelError, id_array
 from .precompile import ensure_compiled
-from .results import ResultsError, ends_run
+from .results import (ResultWriter, check_stored, ends_run, make_folder, open_result,
+                      require_kept, state_fields)
 
 #: energies of an increment at its current state (:meth:`Simulation._energies`)
 Energies = namedtuple("Energies", "stored f_tot dw ratio diss element_diss joint_diss")
@@ -243,8 +245,7 @@ class SolverOptions:
                 ("keep_checkpoint_s", lambda v: v >= 0, ">= 0 s"),
                 ("alpha", ALPHA_RANGE[self.damping][0], ALPHA_RANGE[self.damping][1])):
             v = getattr(self, name)
-            if not (isinstance(v, (int, float, np.integer, np.floating))
-                    and not isinstance(v, (bool, np.bool_)) and np.isfinite(v) and ok(v)):
+            if not (L.is_number(v) and ok(v)):
                 raise OptionsError(f"SolverOptions.{name}={v!r}: must be a finite number {what}")
 
 
@@ -376,7 +377,7 @@ class Simulation:
             if np.intersect1d(rp.nodes, nodes).size:
                 raise L.LoadingError(f"rigid point {name!r} shares nodes with {rp.name!r}")
         pos = (self.model.nodes[nodes].mean(axis=0) if position is None
-               else L._vector(f"rigid point {name!r}: position", position, 3))
+               else L.finite_vector(f"rigid point {name!r}: position", position, 3))
         rp = L.RigidPoint(name, nodes, pos, len(self.rigid_points))
         self.rigid_points.append(rp)
         return rp
@@ -484,8 +485,6 @@ class Simulation:
         self.writer = None
         self._u_committed = np.zeros((n, 3))
         if self.output is not None:
-            import os
-            from .results import ResultWriter, make_folder
             make_folder(os.path.dirname(os.path.abspath(self.output)))
             cfg = dict(self.config, solver=asdict(self.options))
             self.writer = ResultWriter(self.output, m, cfg, mode="a" if self._resuming else "w")
@@ -601,9 +600,7 @@ class Simulation:
     # ------------------------------------------------------------------ controls
     def _key(self, ctl):
         if isinstance(ctl, (L.Displacement, L.Force, L.Indirect)):
-            t = ctl.target
-            if not isinstance(t, (L.RigidPoint, L.NodeSet)):
-                raise L.LoadingError(f"control {ctl.label}: target must be a RigidPoint or NodeSet")
+            t = ctl.target   # a RigidPoint or NodeSet: checked when the control was made
             return (type(ctl).__name__ == "Force", t.name,
                     L.dof_index(ctl.dof, isinstance(t, L.RigidPoint)))
         return ("load", ctl.pattern.name)
@@ -1155,7 +1152,6 @@ class Simulation:
 
     def fields(self):
         """Current field values for a frame: U, dt, dc per element, D/opening/slip per contact."""
-        from .results import state_fields
         d, mesh, cont = self.dyn, self.mesh, self.cont
         f = state_fields(d.U, mesh.s_old, cont.s_old)
         if cont.slave.size:
@@ -1223,7 +1219,6 @@ class Simulation:
         if self._built:
             raise L.LoadingError("resume() must be called before the first run")
         if increment is not None:   # checked before the file is opened for writing
-            from .results import open_result, require_kept
             require_kept(path, open_result(path).kept_checkpoints, increment)
         self.output = path
         self._resuming = True
@@ -1238,18 +1233,13 @@ class Simulation:
                     s_blocks=self.mesh.s_old.shape, s_joints=self.cont.s_old.shape, f_prev=None,
                     du_prev=None)
         for k, shape in need.items():
-            if k not in arrays:
-                raise ResultsError(f"checkpoint of {self.output} is damaged: it lacks {k}")
-            a = np.asarray(arrays[k])
-            if shape is not None and a.shape != shape:
-                raise L.LoadingError(f"checkpoint of {self.output}: {k} has shape {a.shape}, this "
-                                     f"model needs {shape} (not the same model)")
-            if a.dtype.kind == "f" and not np.isfinite(a).all():
-                raise ResultsError(f"checkpoint of {self.output} is damaged: {k} holds "
-                                   f"{np.count_nonzero(~np.isfinite(a))} non-finite values")
+            if k in arrays and shape is not None and np.shape(arrays[k]) != shape:
+                raise L.LoadingError(f"checkpoint of {self.output}: {k} has shape "
+                                     f"{np.shape(arrays[k])}, this model needs {shape} (not the "
+                                     "same model)")
+            check_stored(self.output, k, arrays.get(k))
 
     def _load_checkpoint(self):
-        from .results import open_result
         if self._resume_increment is not None:
             self.writer.rewind(int(self._resume_increment))
         inc, arrays, meta = open_result(self.output).checkpoint()

@@ -171,7 +171,7 @@ def stage_rows(h5, stage, n_rows):
     mine = [i for i, a in enumerate(attrs) if a.get("stage") == stage]
     if not mine:
         raise ResultsError(f"{h5}: no frame of stage {stage!r} (stages with frames: "
-                         f"{sorted({str(a.get('stage')) for a in attrs})})")
+                           f"{sorted({str(a.get('stage')) for a in attrs})})")
     start = attrs[mine[0] - 1]["history_rows"] if mine[0] > 0 else 0
     return slice(int(start), int(attrs[mine[-1]]["history_rows"]))
 

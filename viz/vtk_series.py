@@ -16,6 +16,7 @@ import numpy as np
 import vtk
 from vtk.util.numpy_support import numpy_to_vtk
 
+from dr_masonry.loading import is_number
 from dr_masonry.postprocess import PostprocessError
 from dr_masonry.results import Result, make_folder, open_result
 
@@ -27,8 +28,7 @@ def as_result(obj):
 
 def positions(nodes, fields, warp=1.0):
     """Node positions (nn, 3), m: ``nodes + warp * fields["U"]`` (``nodes`` without "U")."""
-    if (isinstance(warp, bool) or not isinstance(warp, (int, float, np.integer, np.floating))
-            or not np.isfinite(warp)):
+    if not is_number(warp):
         raise PostprocessError(f"warp={warp!r}: the displacement scale must be a finite number")
     if warp and "U" in fields:
         return nodes + warp * fields["U"]
