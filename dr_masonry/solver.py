@@ -1062,8 +1062,10 @@ class Simulation:
             for k in range(3):
                 row[f"{name}.f{'xyz'[k]}"] = float(f[k])
         # finite sliding: re-pair for the next increment (this row's forces are those above)
-        row["contacts_moved"] = self.sliding.update() if self.sliding is not None else 0
+        sl = self.sliding
+        row["contacts_moved"] = sl.update() if sl is not None else 0
         row["contacts_off"] = int((cont.area == 0.0).sum())
+        row["contacts_sunk"] = int((sl.sunk > 0.0).sum()) if sl is not None else 0
         self._cut_work = [0, 0.0]
         for key, v in row.items():
             self.history.setdefault(key, [np.nan] * (self.increment - 1)).append(float(v))

@@ -8,7 +8,7 @@ import pytest
 from dr_masonry import BodyForce, Gravity, Indirect, JointLaw, Load, Model, PlasticDamage
 from dr_masonry import Simulation, SolverOptions, Stage
 from dr_masonry.contact_search import local_gaps, project_bilinear
-from dr_masonry.kernels.joint_law import JS_D, JS_DP1, JS_DP2, JS_G1
+from dr_masonry.kernels.joint_law import JS_D, JS_DP1, JS_DP2, JS_G1, JS_GU, P_KC
 from dr_masonry.sliding import SWITCH
 from dr_masonry.results import ResultsError, open_result
 
@@ -111,30 +111,65 @@ def test_points_taken_back_after_sliding_off_come_back_as_fresh_contacts():
                                back[0] - back[-1], rtol=1e-3)
 
 
-def test_a_face_does_not_take_back_a_node_behind_it():
+def _normal_traction(sim, pts):
+    """sigma (Pa) of contact points ``pts`` at the current displacements (their committed
+    histories unchanged)."""
+    from dr_masonry.kernels.forces import contact_forces
+    c, n = sim.cont, pts.size
+    trac = np.zeros((n, 3))
+    contact_forces(sim.model.nodes, sim.dyn.U, c.slave[pts], c.master[pts], c.xi[pts],
+                   c.area[pts], c.law[pts], c.lparams, c.gap0[pts], c.s_old[pts],
+                   c.s_new[pts].copy(), np.zeros((n, 3)), trac, np.zeros((5 * n, 3)), np.zeros(n))
+    return trac[:, 0]
+
+
+def test_a_node_behind_a_face_is_seated_where_it_is_and_the_seat_rises_with_it():
     """After the push, the block is moved back 20 mm by hand (the two nodes off the end come
     within reach of B's face again) with those nodes sagging 2 mm below the face's plane (a
-    crushed corner hanging over the edge): their points stay off, as the penalty would throw
-    the nodes out. Lifted to the plane, they are taken back, seated on the face."""
+    crushed corner hanging over the edge). Seated at the face, the penalty would throw them out;
+    they are seated where they are, 2 mm sunk: no traction there, the penalty against a further
+    sinking, none against lifting. Lifted by 1.5 mm the seat follows them to 0.5 mm below the
+    face, and lifted above the face it is back at the face. A node on the far side of the brick
+    (100 mm below, beyond ``SINK``) is not seated."""
     sim, rp, blk = build()
     with pytest.warns(RuntimeWarning, match="slid"):
         sim.run(stages(rp, blk, PATH))
-    c, m = sim.cont, sim.model
+    c, m, sl = sim.cont, sim.model, sim.sliding
     off = np.flatnonzero(c.area == 0.0)
-    nodes = m.block_nodes(blk)
-    sim.dyn.U[nodes, 0] -= 0.02
-    sim.dyn.U[c.slave[off], 2] -= 0.002
-    sim.sliding.update()
-    assert np.all(c.area[off] == 0.0)
-    sim.dyn.U[c.slave[off], 2] += 0.002
-    sim.sliding.update()
-    np.testing.assert_allclose(c.area[off], sim.sliding.area0[off])
+    assert off.size == 2
+    kc = c.lparams[c.law[off], P_KC]
+    sim.dyn.U[m.block_nodes(blk), 0] -= 0.02
+    sim.dyn.U[c.slave[off], 2] -= 0.1
+    sl.update()                                           # far side of the brick: off
+    assert np.all(c.area[off] == 0.0) and np.all(sl.sunk == 0.0)
+    sim.dyn.U[c.slave[off], 2] += 0.098
+    sl.update()
+    np.testing.assert_allclose(c.area[off], sl.area0[off])
+    np.testing.assert_allclose(sl.sunk[off], 0.002, atol=1e-8)
     np.testing.assert_allclose(c.s_old[off, JS_D], 1.0)
     np.testing.assert_allclose(c.s_old[off, JS_DP1:JS_DP2 + 1], 0.0)
     x = m.nodes + sim.dyn.U
     g = local_gaps(x, c.slave[off], c.master[off], c.xi[off]) - c.gap0[off]
-    np.testing.assert_allclose(g[:, 1:], 0.0, atol=1e-12)        # seated: no slip,
-    np.testing.assert_allclose(g[:, 0], 0.0, atol=1e-8)          # at its contact pressure
+    np.testing.assert_allclose(g, 0.0, atol=1e-12)        # seated where it is: no slip, no gap
+    np.testing.assert_allclose(_normal_traction(sim, off), 0.0, atol=1e-3)
+    sim.dyn.U[c.slave[off], 2] -= 1e-4                    # sinking further: the penalty
+    np.testing.assert_allclose(_normal_traction(sim, off), -kc * 1e-4, rtol=1e-6)
+    sim.dyn.U[c.slave[off], 2] += 1e-4 + 0.0015           # lifted 1.5 mm: free, seat follows
+    assert np.all(_normal_traction(sim, off) == 0.0)
+    gu = c.s_old[off, JS_GU].copy()
+    sl.update()
+    np.testing.assert_allclose(sl.sunk[off], 0.0005, atol=1e-8)
+    x = m.nodes + sim.dyn.U
+    g = local_gaps(x, c.slave[off], c.master[off], c.xi[off]) - c.gap0[off]
+    np.testing.assert_allclose(g[:, 0], 0.0, atol=1e-12)
+    np.testing.assert_allclose(c.s_old[off, JS_GU], gu - 0.0015, atol=1e-8)   # its gap as well
+    sim.dyn.U[c.slave[off], 2] += 0.0015                  # 1 mm above the face: seat at it
+    sl.update()
+    assert np.all(sl.sunk[off] == 0.0)
+    x = m.nodes + sim.dyn.U
+    g = local_gaps(x, c.slave[off], c.master[off], c.xi[off]) - c.gap0[off]
+    np.testing.assert_allclose(g[:, 0], 0.001, atol=1e-8)
+    np.testing.assert_allclose(c.gap0[off, 0], sl.u_ref[off], atol=1e-12)   # the face's seat
 
 
 def test_an_increment_that_moves_the_energy_balance_names_its_points():
