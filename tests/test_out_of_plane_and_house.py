@@ -132,9 +132,14 @@ def test_s7_reduced_cyclic_protocol(tmp_path, capsys):
     terraced_house.main(["fast=true", "protocol=cyclic", f"out={out}"])
     hist = open_result(f"{out}.h5").history
     push = hist["increment"] > terraced_house.FAST["gravity_increments"]
-    u = hist["floor2.ux"][push] * 1e3
+    # the protocol's rows; an increment cut in two adds the row between (rounding decides
+    # whether the tiny house needs a cut: with or without fused multiply-adds, say)
+    steps = hist["floor2.ux"] / 1.25e-3
+    rows = push & np.isclose(steps, np.round(steps), rtol=0, atol=1e-6)
+    assert push.sum() - rows.sum() <= 2
+    u = hist["floor2.ux"][rows] * 1e3
     assert np.allclose(u, [1.25, 2.5, 1.25, 0.0, -1.25, -2.5, -1.25, 0.0], atol=1e-6)
-    V = hist["lambda"][push] * 2 * 2                 # whole house: two floors, two halves
+    V = hist["lambda"][rows] * 2 * 2                 # whole house: two floors, two halves
     assert V[1] > 0 and V[5] < 0 and V[3] < 0 and max(V) > 0.5 * -min(V) > 0
     assert abs(V[7]) < 0.25 * np.abs(V).max()
     # global equilibrium to the out-of-balance that tol leaves (its scale is the weight)
@@ -146,7 +151,7 @@ def test_s7_reduced_cyclic_protocol(tmp_path, capsys):
     assert np.all(np.abs(hist["balance_error"]) < 0.1)   # 1.25 mm steps on a tiny house
     table = np.genfromtxt(f"{out}_cycles.csv", delimiter=",", names=True)
     assert table["D_joints"] == pytest.approx(cycles[0]["D_joints"], rel=1e-12)
-    assert table["F_max"] == pytest.approx(V.max() / 2, rel=1e-12)    # the half model's
+    assert table["F_max"] == pytest.approx(hist["lambda"][push].max() * 2, rel=1e-12)  # half
     assert 0.0 < table["xi_eq"] < 0.5
     assert "cycles of the half model" in capsys.readouterr().out
 
