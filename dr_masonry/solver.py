@@ -229,10 +229,11 @@ class SolverOptions:
                                "'auto'")
         for name, low in (("max_iter", 1), ("check_every", 1), ("coarse_every", 1),
                           ("max_cuts", 0), ("stall_iter", 0)):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, np.integer)) and not isinstance(v, (bool, np.bool_))
-                    and v >= low):
+            v = getattr(self, name)   # an integral number (2e5 as Stage takes it), not a bool
+            if not (L.is_number(v) and not isinstance(v, (bool, np.bool_))
+                    and float(v).is_integer() and v >= low):
                 raise OptionsError(f"SolverOptions.{name}={v!r}: must be an integer >= {low}")
+            setattr(self, name, int(v))
         for name, ok, what in (
                 ("tol", lambda v: v > 0, "> 0"),
                 ("safety", lambda v: v >= 1.0, ">= 1 for a stable step"),

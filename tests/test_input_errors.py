@@ -42,6 +42,13 @@ def test_solver_options_name_the_field(field, value, msg):
         SolverOptions(damping="local", alpha=1.0)
 
 
+def test_integer_options_take_integral_numbers_as_stages_do():
+    o = SolverOptions(max_iter=2e5, max_cuts=np.int64(6), stall_iter=0.0)
+    assert (o.max_iter, o.max_cuts, o.stall_iter) == (200_000, 6, 0)
+    assert all(type(v) is int for v in (o.max_iter, o.max_cuts, o.stall_iter))
+    assert Stage("s", 2e1).increments == 20
+
+
 def test_stages_controls_and_patterns_are_checked_when_made():
     bad = [
         (lambda: Stage("s", 0), r"stage 's': increments=0 must be an integer >= 1"),
