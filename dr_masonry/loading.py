@@ -226,6 +226,20 @@ class Indirect(_Control):
     dof: str = "x"
 
 
+#: the most increments one stage or protocol path may have: an increment relaxes in 10^2-10^5
+#: iterations of about a millisecond, so a million is at least a day's run; more is a typo or a
+#: step far too fine, and a path of 10^9 targets would not even fit in memory
+MAX_INCREMENTS = 1_000_000
+
+
+def check_increments(n, what):
+    """Raise :class:`LoadingError` naming ``what`` if ``n`` increments exceed MAX_INCREMENTS."""
+    if n > MAX_INCREMENTS:
+        raise LoadingError(f"{what}: {n:,} increments exceed MAX_INCREMENTS = {MAX_INCREMENTS:,} "
+                           "(an increment relaxes in 10^2-10^5 iterations: use a coarser step or "
+                           "fewer increments)")
+
+
 @dataclass(eq=False)
 class Stage:
     """A loading stage: ``increments`` load increments over which ``controls`` move.
@@ -247,6 +261,7 @@ class Stage:
                     and v >= low):
                 raise LoadingError(f"stage {self.name!r}: {key}={v!r} must be an integer >= {low}")
         self.increments = int(self.increments)
+        check_increments(self.increments, f"stage {self.name!r}")
         self.frames = int(self.frames)
         self.max_iter = None if self.max_iter is None else int(self.max_iter)
         if self.tol is not None and not (is_number(self.tol) and self.tol > 0):
@@ -269,6 +284,7 @@ def cyclic_path(amplitudes, cycles=2, points_per_quarter=4, start_negative=False
     if amps.size == 0 or np.any(amps <= 0) or not np.all(np.isfinite(amps)):
         raise LoadingError(f"cyclic protocol: amplitudes must be positive and finite, got {amps}")
     k = int(points_per_quarter)
+    check_increments(4 * k * int(cycles) * amps.size, "cyclic protocol")
     sgn = -1.0 if start_negative else 1.0
     q = np.arange(1, k + 1) / k
     out = []

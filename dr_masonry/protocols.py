@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .loading import LoadingError, cyclic_path
+from .loading import LoadingError, check_increments, cyclic_path
 from .units import mm
 
 
@@ -76,6 +76,8 @@ class Protocol:
                                    f"got {n_amplitudes!r}")
             amps = amps[:int(n_amplitudes)]
         quarter = [max(int(quarter_increments), math.ceil(a / step - 1e-9)) for a in amps]
+        check_increments(4 * self.cycles * sum(quarter), f"protocol {self.name} with step "
+                         f"{step!r} m")
         parts = [cyclic_path([a], self.cycles, k, start_negative) for a, k in zip(amps, quarter)]
         return np.concatenate(parts)
 
@@ -86,6 +88,7 @@ class Protocol:
         n = int(increments)
         if n < 1:
             raise LoadingError(f"protocol {self.name}: increments must be >= 1, got {increments!r}")
+        check_increments(n, f"protocol {self.name}")
         if not (math.isfinite(grading) and grading > 0):
             raise LoadingError(f"protocol {self.name}: grading must be > 0, got {grading!r}")
         goal = self.monotonic if target is None else float(target)

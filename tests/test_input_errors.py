@@ -11,7 +11,8 @@ import pytest
 from dr_masonry import (BodyForce, Displacement, Force, Gravity, JointLaw, Load, Model,
                         PlasticDamage, Simulation, SolverOptions, Stage)
 from dr_masonry.cli import main
-from dr_masonry.loading import Combined, LoadingError, PointLoad, Pressure
+from dr_masonry.loading import Combined, LoadingError, PointLoad, Pressure, cyclic_path
+from dr_masonry.protocols import S5
 from dr_masonry.model import ModelError
 from dr_masonry.results import ResultsError, make_folder, open_result
 from dr_masonry.solver import OptionsError
@@ -40,6 +41,19 @@ def test_solver_options_name_the_field(field, value, msg):
         SolverOptions(**{field: value})
     with pytest.raises(OptionsError, match=r"alpha=1.0: must be a finite number in \[0, 1\)"):
         SolverOptions(damping="local", alpha=1.0)
+
+
+def test_paths_of_more_increments_than_any_run_could_relax_are_refused():
+    """A billion increments was killed for memory while the targets were built."""
+    with pytest.raises(LoadingError, match=r"stage 's': 1,000,000,000 increments exceed"):
+        Stage("s", 1e9)
+    with pytest.raises(LoadingError, match=r"protocol S5 with step 1e-09 m: .* exceed"):
+        S5.path(height=2.75, step=1e-9)
+    with pytest.raises(LoadingError, match=r"protocol S5: 2,000,000 increments exceed"):
+        S5.monotonic_path(2e6, height=2.75)
+    with pytest.raises(LoadingError, match=r"cyclic protocol: .* exceed"):
+        cyclic_path([1.0], cycles=2, points_per_quarter=10**6)
+    assert S5.path(height=2.75, step=0.00025).size == 2192    # the scene's default path
 
 
 def test_integer_options_take_integral_numbers_as_stages_do():
