@@ -17,11 +17,7 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 import numba  # noqa: E402
 from numba.core import caching  # noqa: E402
 
-#: LLVM may fuse a multiplication and an addition into one FMA instruction (one rounding
-#: instead of two), as C compilers do by default: the hexahedra's force 1.2 x faster, 11 % off an
-#: iteration of a 4.0 m wall (BENCHMARKS.md section 43). Nothing else: without "nnan"/"ninf" the
-#: guards' NaN and Inf tests keep their meaning, and without "reassoc" sums keep their order
-FASTMATH = {"contract"}
+FASTMATH = False  # keep IEEE semantics: NaN detection by the guards must work
 
 _HERE = os.path.dirname(os.path.abspath(__file__))
 
