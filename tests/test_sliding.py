@@ -262,3 +262,42 @@ def test_resume_from_a_kept_checkpoint(tmp_path, capsys):
     assert main(["info", path]) == 0
     assert "kept checkpoints: increments 1, 2, 3, 4, 5, 6 (resume_from=INCREMENT)" in \
         capsys.readouterr().out
+
+
+def test_a_sagging_corner_slid_back_over_a_face_is_held_where_it_is():
+    """The block's leading base corner (two nodes), pushed 60 mm beyond B's end, is pulled 2 mm
+    down (a prescribed displacement: a crushed corner hanging over the edge) and the block slid
+    back 20 mm, over B's face: the corner's points come back sunk 2 mm, the block slides back at
+    the friction plateau with nothing thrown, and when the corner is lifted to the face the seats
+    rise with it; the energy balance holds throughout. (Before the sunk seats, the two points
+    stayed off and the corner could sink into B unresisted.)"""
+    from dr_masonry import Displacement
+    sim, rp, blk = build()
+    m = sim.model
+    nodes = m.block_nodes(blk)
+    x0 = m.nodes[nodes]
+    tip = sim.node_set("tip", nodes[np.isclose(x0[:, 0], 0.3) & np.isclose(x0[:, 2], 0.0)])
+    pattern = BodyForce(accel=(9.81, 0.0, 0.0), blocks=[blk])
+
+    def hold(path, z):
+        return [Indirect(pattern=pattern, target=rp, dof="x", path=path, name="push"),
+                Displacement(target=tip, dof="z", to=z)]
+    run = stages(rp, blk, PATH, pattern) + [
+        Stage("sag", 2, hold([PATH[-1]] * 2, -0.002)),
+        Stage("back", 2, hold([0.15, 0.14], -0.002)),
+        Stage("lift", 2, hold([0.14, 0.14], 0.0))]
+    with pytest.warns(RuntimeWarning, match="slid"):
+        hist = sim.run(run)
+    n = PATH.size + 1
+    off, sunk = hist["contacts_off"], hist["contacts_sunk"]
+    assert np.all(off[n - 1:n + 2] == 2) and np.all(sunk[:n + 2] == 0)   # off while sagging
+    assert off[n + 2] == 0 and sunk[n + 2] == 2          # taken back sunk at the first row back
+    assert off[-1] == 0 and sunk[-1] == 0                # lifted to the face: seated there
+    # sliding back at the friction plateau of the base's normal force: the weight and the pull
+    # that holds the corner down
+    back = slice(n + 2, n + 4)
+    np.testing.assert_allclose(hist["base.fx"][back], MU * hist["base.fz"][back], rtol=1e-3)
+    np.testing.assert_allclose(hist["base.fz"][back], WEIGHT - hist["tip.fz"][back], rtol=1e-3)
+    z = (m.nodes + sim.dyn.U)[nodes, 2] - m.nodes[nodes, 2]
+    assert np.abs(z).max() < 1e-4                        # nothing thrown
+    assert np.all(np.abs(hist["balance_error"]) < 0.02)
