@@ -12,8 +12,8 @@ from dr_masonry import (BodyForce, Displacement, Force, Gravity, JointLaw, Load,
                         PlasticDamage, Simulation, SolverOptions, Stage)
 from dr_masonry.cli import main
 from dr_masonry.loading import Combined, LoadingError, PointLoad, Pressure, cyclic_path
-from dr_masonry.protocols import S5
 from dr_masonry.model import ModelError
+from dr_masonry.protocols import S5
 from dr_masonry.results import ResultsError, make_folder, open_result
 from dr_masonry.solver import OptionsError
 from test_results import write_fake_result

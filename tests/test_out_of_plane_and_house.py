@@ -132,8 +132,8 @@ def test_s7_reduced_cyclic_protocol(tmp_path, capsys):
     terraced_house.main(["fast=true", "protocol=cyclic", f"out={out}"])
     hist = open_result(f"{out}.h5").history
     push = hist["increment"] > terraced_house.FAST["gravity_increments"]
-    # the protocol's rows; an increment cut in two adds the row between (rounding decides
-    # whether the tiny house needs a cut: with or without fused multiply-adds, say)
+    # the protocol's rows; an increment cut in two adds the row between (whether the tiny house
+    # needs a cut is decided at the rounding level: fused multiply-adds did, BENCHMARKS.md 43)
     steps = hist["floor2.ux"] / 1.25e-3
     rows = push & np.isclose(steps, np.round(steps), rtol=0, atol=1e-6)
     assert push.sum() - rows.sum() <= 2
