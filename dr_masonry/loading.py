@@ -35,6 +35,11 @@ def is_number(x):
             and not isinstance(x, (bool, np.bool_)) and bool(np.isfinite(x)))
 
 
+def is_count(x, low):
+    """Whether ``x`` is an integral finite number >= ``low`` (2e5 counts; 2.5 and bools do not)."""
+    return is_number(x) and float(x).is_integer() and x >= low
+
+
 def finite_vector(what, x, n=None):
     """``x`` as a finite float64 array (of ``n`` values when given), else LoadingError naming it."""
     try:
@@ -257,8 +262,7 @@ class Stage:
     def __post_init__(self):
         for key, low in (("increments", 1), ("frames", 1), ("max_iter", 1)):
             v = getattr(self, key)
-            if not (v is None and key == "max_iter" or is_number(v) and float(v).is_integer()
-                    and v >= low):
+            if not (v is None and key == "max_iter" or is_count(v, low)):
                 raise LoadingError(f"stage {self.name!r}: {key}={v!r} must be an integer >= {low}")
         self.increments = int(self.increments)
         check_increments(self.increments, f"stage {self.name!r}")

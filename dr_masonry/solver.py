@@ -229,9 +229,8 @@ class SolverOptions:
                                "'auto'")
         for name, low in (("max_iter", 1), ("check_every", 1), ("coarse_every", 1),
                           ("max_cuts", 0), ("stall_iter", 0)):
-            v = getattr(self, name)   # an integral number (2e5 as Stage takes it), not a bool
-            if not (L.is_number(v) and not isinstance(v, (bool, np.bool_))
-                    and float(v).is_integer() and v >= low):
+            v = getattr(self, name)   # an integral number, as Stage takes it
+            if not L.is_count(v, low):
                 raise OptionsError(f"SolverOptions.{name}={v!r}: must be an integer >= {low}")
             setattr(self, name, int(v))
         for name, ok, what in (
