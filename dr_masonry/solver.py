@@ -22,9 +22,10 @@ from .kernels import relaxation as R
 from .kernels.assembly import node_row_map
 from .kernels.contact_forces import contact_rowsum
 from .kernels.forces import Cont, Mesh
-from .kernels.hex8 import hex_geometry_shared, lumped_mass, pristine_elements, stiffness_rowsum
+from .kernels.hex8 import (corot_tables, hex_geometry_shared, lumped_mass, pristine_elements,
+                           stiffness_rowsum)
 from .kernels.joint_law import JS_D, JS_DISS, JS_DISSF
-from .kernels.plastic_damage import MP_HMAX, MS_DC, MS_DISS, MS_DT
+from .kernels.plastic_damage import MP_ELASTIC, MP_HMAX, MS_DC, MS_DISS, MS_DT
 from .materials import JointLaw, PlasticDamage
 from .model import ModelError, id_array
 from .precompile import ensure_compiled
@@ -413,9 +414,13 @@ class Simulation:
         s_old = np.ascontiguousarray(np.repeat(s0[:, None, :], 8, axis=1))
         ptr, rows = node_row_map(conn, n)
         self._s_virgin = s0
+        # elastic materials: corotational linear elements (one stiffness per brick shape)
+        corot = corot_tables(X, conn, dN, geo, wdet, emat, mparams,
+                             active[mparams[emat[active], MP_ELASTIC] == 1.0])
         self.mesh = Mesh(conn, active, dN, geo, wdet, h, emat, mparams, s_old, s_old.copy(),
                          np.zeros(conn.shape[0], np.uint8), np.zeros(conn.shape[0], np.uint8),
-                         np.zeros((conn.shape[0], 8, 3)), np.zeros(conn.shape[0]), ptr, rows)
+                         *corot, np.zeros((conn.shape[0], 8, 3)), np.zeros(conn.shape[0]), ptr,
+                         rows)
         self._mark_pristine()
         self.mass = lumped_mass(conn, wdet, rho, n)  # physical, kg
         a = active

@@ -19,8 +19,8 @@ from .hex8 import hex_chunk
 from .joint_law import NJP, NJS
 from .plastic_damage import NMS
 
-Mesh = namedtuple("Mesh", "conn active dN geo wdet h emat mparams s_old s_new pristine dirty fbuf "
-                         "energy ptr rows")
+Mesh = namedtuple("Mesh", "conn active dN geo wdet h emat mparams s_old s_new pristine dirty ke "
+                         "kxo kdn kid fbuf energy ptr rows")
 Cont = namedtuple("Cont", "slave master xi area law lparams gap0 s_old s_new gaps trac fbuf psi ptr rows")
 
 
@@ -42,7 +42,8 @@ def element_and_contact_forces(X, U, mesh, cont):
             hc = j - 1
             hex_chunk(hc * HEX_CHUNK, min(na, (hc + 1) * HEX_CHUNK), U, mesh.conn, mesh.active,
                       mesh.dN, mesh.geo, mesh.wdet, mesh.h, mesh.emat, mesh.mparams,
-                      mesh.s_old, mesh.s_new, mesh.pristine, mesh.dirty, mesh.fbuf, mesh.energy)
+                      mesh.s_old, mesh.s_new, mesh.pristine, mesh.dirty, mesh.ke, mesh.kxo,
+                      mesh.kdn, mesh.kid, mesh.fbuf, mesh.energy)
         else:
             c = t - j
             contact_chunk(c * CONTACT_CHUNK, min(nc, (c + 1) * CONTACT_CHUNK), X, U,
@@ -64,17 +65,24 @@ NO_CONTACTS = Cont(_none(0, dtype=np.int64), _none(0, 4, dtype=np.int64), _none(
 NO_ELEMENTS = Mesh(_none(0, 8, dtype=np.int64), _none(0, dtype=np.int64), _none(0, 8, 8, 3),
                    _none(0, dtype=np.int64), _none(0, 8), _none(0), _none(0, dtype=np.int64),
                    _none(1, 1), _none(0, 8, NMS), _none(0, 8, NMS), _none(0, dtype=np.uint8),
-                   _none(0, dtype=np.uint8), _none(0, 8, 3), _none(0), _none(1, dtype=np.int64),
+                   _none(0, dtype=np.uint8), _none(0, 24, 24), _none(0, 8, 3), _none(0, 8, 3),
+                   _none(0, dtype=np.int64), _none(0, 8, 3), _none(0), _none(1, dtype=np.int64),
                    _none(0, dtype=np.int64))
 
 
+def no_corot(ne):
+    """Corotational tables (ke, kxo, kdn, kid) of ``ne`` elements none of which uses them."""
+    return (_none(0, 24, 24), _none(0, 8, 3), _none(0, 8, 3), np.full(ne, -1, dtype=np.int64))
+
+
 def hex_only_args(U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old, s_new, pristine,
-                  dirty, f_elem, energy):
+                  dirty, f_elem, energy, corot=None):
     """Arguments of :func:`element_and_contact_forces` for :func:`hex_forces` (same parameters):
     (X, U, Mesh of these arrays without a node map, NO_CONTACTS). The reference coordinates are
     read by contact points only: U stands in for them."""
+    corot = no_corot(conn.shape[0]) if corot is None else corot
     return U, U, Mesh(conn, active, dN, geo, wdet, h, elem_mat, params, s_old, s_new, pristine,
-                      dirty, f_elem, energy, NO_CONTACTS.ptr, NO_CONTACTS.rows), NO_CONTACTS
+                      dirty, *corot, f_elem, energy, NO_CONTACTS.ptr, NO_CONTACTS.rows), NO_CONTACTS
 
 
 def contact_only_args(X, U, slave, master, xi, area, law, lparams, gap0, s_old, s_new, gaps, trac,
@@ -86,7 +94,7 @@ def contact_only_args(X, U, slave, master, xi, area, law, lparams, gap0, s_old, 
 
 
 def hex_forces(U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old, s_new, pristine,
-               dirty, f_elem, energy):
+               dirty, f_elem, energy, corot=None):
     """Internal forces and stored elastic energy of the ``active`` elements (parallel, race-free).
 
     Parameters
@@ -121,10 +129,15 @@ def hex_forces(U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old, s_new
         element internal forces, written.
     energy : (ne,) float64, J
         stored elastic energy sum_g wdet 0.5 S : (E - E_p), written (E_p = 0 for a
-        material with ``p[MP_ELASTIC] == 1``).
+        material with ``p[MP_ELASTIC] == 1``; d.K d / 2 on the corotational path).
+    corot : tuple, optional
+        ``(ke, kxo, kdn, kid)`` of :func:`.hex8.corot_tables`: elements with ``kid >= 0`` take the
+        corotational linear path (:func:`.hex8.corot_local`; what a run does for elastic
+        materials). None: every element at its Gauss points (total Lagrangian).
     """
     element_and_contact_forces(*hex_only_args(U, conn, active, dN, geo, wdet, h, elem_mat, params,
-                                              s_old, s_new, pristine, dirty, f_elem, energy))
+                                              s_old, s_new, pristine, dirty, f_elem, energy,
+                                              corot))
 
 
 def contact_forces(X, U, slave, master, xi, area, law, lparams, gap0, s_old, s_new, gaps, trac,

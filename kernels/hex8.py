@@ -20,8 +20,8 @@ Conventions
 import numpy as np
 
 from .config import ijit, jit, pjit, prange
-from .plastic_damage import (MP_ELASTIC, MP_SBC0, MP_SBT0, MS_EPSP, NMS, elastic_stress,
-                             gp_update, surely_elastic, trial_stress)
+from .plastic_damage import (MP_E, MP_ELASTIC, MP_NU, MP_SBC0, MP_SBT0, MS_EPSP, NMS,
+                             elastic_stress, gp_update, surely_elastic, trial_stress)
 
 CORNERS = np.array(
     [[-1, -1, -1], [1, -1, -1], [1, 1, -1], [-1, 1, -1],
@@ -258,12 +258,17 @@ def hex_add_gauss_force(F, sig, dng, w, fe):
 
 @ijit
 def hex_chunk(lo, hi, U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old, s_new, pristine,
-              dirty, f_elem, energy):
+              dirty, ke, kxo, kdn, kid, f_elem, energy):
     """Elements ``active[lo:hi]`` of :func:`.forces.hex_forces` (one parallel task, its own scratch)."""
     ue = np.empty((8, 3))
     F = np.empty((3, 3))
     eps = np.empty(6)
     sig = np.empty(6)
+    # corotational elements: local displacements, rotations and table of each slot of the task
+    dl = np.empty((hi - lo, 24))
+    fl = np.empty((hi - lo, 24))
+    rot = np.empty((hi - lo, 3, 3))
+    slot = np.full(hi - lo, -1, dtype=np.int64)
     for k in range(lo, hi):
         e = active[k]
         fe = f_elem[e]
@@ -272,6 +277,14 @@ def hex_chunk(lo, hi, U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old
             for i in range(3):
                 ue[a, i] = U[n, i]
                 fe[a, i] = 0.0
+        t = kid[e]
+        if t >= 0:   # elastic material: corotational linear element, its K d below
+            if corot_local(ue, kxo[t], kdn[t], rot[k - lo], dl[k - lo]) > 0.0:
+                slot[k - lo] = t
+            else:   # inverted: NaN for the run's guards
+                fe[:, :] = np.nan
+                energy[e] = np.nan
+            continue
         p = params[elem_mat[e]]
         plastic = p[MP_ELASTIC] != 1.0
         fast = plastic and pristine[e] != 0   # virgin state: no state to read while elastic
@@ -317,6 +330,18 @@ def hex_chunk(lo, hi, U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old
                     s_new[e, g, m] = s_old[e, g, m]
             dirty[e] = 0
         energy[e] = en
+    j = 0
+    while j < hi - lo:   # K d of each run of slots with one table: one matrix product (BLAS)
+        t = slot[j]
+        j1 = j + 1
+        while j1 < hi - lo and slot[j1] == t:
+            j1 += 1
+        if t >= 0:
+            np.dot(dl[j:j1], ke[t], fl[j:j1])   # K symmetric: (K d)^T = d^T K
+            for jj in range(j, j1):
+                e = active[lo + jj]
+                energy[e] = corot_global(rot[jj], dl[jj], fl[jj], f_elem[e])
+        j = j1
 
 
 def pristine_elements(s_old, s_virgin, h, h_max):
@@ -329,6 +354,141 @@ def pristine_elements(s_old, s_virgin, h, h_max):
     """
     virgin = np.all(s_old == s_virgin[:, None, :], axis=(1, 2))
     return (virgin & (h > 0.0) & (h <= h_max)).astype(np.uint8)
+
+
+# ---------------------------------------------------------------------------- corotational elastic elements
+#: change of the rotation's largest entry that ends the polar iteration: the iteration converges
+#: quadratically, so the step after a change of 1e-9 is at rounding level
+POLAR_TOL = 1e-9
+POLAR_MAX = 50  #: iterations at most (3-4 at strains up to 1e-3; far more only for gross distortion)
+
+
+@ijit
+def polar_rotation(f00, f01, f02, f10, f11, f12, f20, f21, f22, R):
+    """Rotation ``R`` (3, 3) of the polar decomposition F = R S (S symmetric positive definite).
+
+    Newton's iteration R <- (R + R^-T) / 2 from R = F. Returns det F; for det F <= 0 (an
+    inverted element) ``R`` is not written.
+    """
+    det = (f00 * (f11 * f22 - f12 * f21) + f01 * (f12 * f20 - f10 * f22)
+           + f02 * (f10 * f21 - f11 * f20))
+    if not det > 0.0:
+        return det
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = f00, f01, f02, f10, f11, f12, f20, f21, f22
+    d = det
+    for _ in range(POLAR_MAX):
+        # R^-T = cofactor(R) / det R
+        c00 = (r11 * r22 - r12 * r21) / d
+        c01 = (r12 * r20 - r10 * r22) / d
+        c02 = (r10 * r21 - r11 * r20) / d
+        c10 = (r02 * r21 - r01 * r22) / d
+        c11 = (r00 * r22 - r02 * r20) / d
+        c12 = (r01 * r20 - r00 * r21) / d
+        c20 = (r01 * r12 - r02 * r11) / d
+        c21 = (r02 * r10 - r00 * r12) / d
+        c22 = (r00 * r11 - r01 * r10) / d
+        change = max(abs(c00 - r00), abs(c01 - r01), abs(c02 - r02), abs(c10 - r10),
+                     abs(c11 - r11), abs(c12 - r12), abs(c20 - r20), abs(c21 - r21),
+                     abs(c22 - r22))
+        r00, r01, r02 = 0.5 * (r00 + c00), 0.5 * (r01 + c01), 0.5 * (r02 + c02)
+        r10, r11, r12 = 0.5 * (r10 + c10), 0.5 * (r11 + c11), 0.5 * (r12 + c12)
+        r20, r21, r22 = 0.5 * (r20 + c20), 0.5 * (r21 + c21), 0.5 * (r22 + c22)
+        if 0.5 * change <= POLAR_TOL:
+            break
+        d = (r00 * (r11 * r22 - r12 * r21) + r01 * (r12 * r20 - r10 * r22)
+             + r02 * (r10 * r21 - r11 * r20))
+    R[0, 0], R[0, 1], R[0, 2] = r00, r01, r02
+    R[1, 0], R[1, 1], R[1, 2] = r10, r11, r12
+    R[2, 0], R[2, 1], R[2, 2] = r20, r21, r22
+    return det
+
+
+@ijit
+def corot_local(ue, xo, dnc, R, dl):
+    """Rotation and local displacements of one corotational linear element; returns det F.
+
+    The element's rotation ``R`` (3, 3) is that of the polar decomposition of its volume-averaged
+    deformation gradient F = I + sum_a u_a (x) ``dnc``_a; in the rotated frame the element is
+    linear: local displacements ``dl`` (24,) m, d_a = R^T (x_a - x_0) - (X_a - X_0) (dof 3 a + i),
+    local forces K d, global forces f_a = R (K d)_a (:func:`corot_global`), energy d.K d / 2.
+    Exact under any rigid motion, equal to the total-Lagrangian element to first order in the
+    strain.
+
+    ``ue`` (8, 3) m nodal displacements; ``xo`` (8, 3) m corner offsets X_a - X_0; ``dnc``
+    (8, 3) 1/m volume-averaged dN_a/dX. det F <= 0 (an inverted element): nothing written.
+    """
+    h00 = h01 = h02 = h10 = h11 = h12 = h20 = h21 = h22 = 0.0
+    for a in range(1, 8):   # sum_a dnc_a = 0: displacements relative to corner 0
+        d0, d1, d2 = dnc[a, 0], dnc[a, 1], dnc[a, 2]
+        u0, u1, u2 = ue[a, 0] - ue[0, 0], ue[a, 1] - ue[0, 1], ue[a, 2] - ue[0, 2]
+        h00 += u0 * d0
+        h01 += u0 * d1
+        h02 += u0 * d2
+        h10 += u1 * d0
+        h11 += u1 * d1
+        h12 += u1 * d2
+        h20 += u2 * d0
+        h21 += u2 * d1
+        h22 += u2 * d2
+    det = polar_rotation(1.0 + h00, h01, h02, h10, 1.0 + h11, h12, h20, h21, 1.0 + h22, R)
+    if not det > 0.0:
+        return det
+    a00, a11, a22 = R[0, 0] - 1.0, R[1, 1] - 1.0, R[2, 2] - 1.0   # exact: R - I, small
+    for a in range(8):   # d_a = (R^T - I) xo_a + R^T (u_a - u_0)
+        x0, x1, x2 = xo[a, 0], xo[a, 1], xo[a, 2]
+        w0, w1, w2 = ue[a, 0] - ue[0, 0], ue[a, 1] - ue[0, 1], ue[a, 2] - ue[0, 2]
+        dl[3 * a] = (a00 * x0 + R[1, 0] * x1 + R[2, 0] * x2
+                     + R[0, 0] * w0 + R[1, 0] * w1 + R[2, 0] * w2)
+        dl[3 * a + 1] = (R[0, 1] * x0 + a11 * x1 + R[2, 1] * x2
+                         + R[0, 1] * w0 + R[1, 1] * w1 + R[2, 1] * w2)
+        dl[3 * a + 2] = (R[0, 2] * x0 + R[1, 2] * x1 + a22 * x2
+                         + R[0, 2] * w0 + R[1, 2] * w1 + R[2, 2] * w2)
+    return det
+
+
+@ijit
+def corot_global(R, dl, fl, fe):
+    """Global forces ``fe`` (8, 3) N = R (K d)_a of one corotational element from its local
+    displacements ``dl`` and local forces ``fl`` = K d (24,) N; returns its energy d.K d / 2 (J)."""
+    en = 0.0
+    for r in range(24):
+        en += dl[r] * fl[r]
+    for a in range(8):
+        g0, g1, g2 = fl[3 * a], fl[3 * a + 1], fl[3 * a + 2]
+        for i in range(3):
+            fe[a, i] = R[i, 0] * g0 + R[i, 1] * g1 + R[i, 2] * g2
+    return 0.5 * en
+
+
+def corot_tables(X, conn, dN, geo, wdet, elem_mat, params, elems):
+    """Tables of the corotational path (:func:`corot_local`, :func:`corot_global`) for the elements ``elems``.
+
+    One table per distinct (geometry table, material) pair. ``X`` (n_nodes, 3) m; ``conn``,
+    ``dN``, ``geo``, ``wdet`` as for :func:`.forces.hex_forces`; ``elem_mat`` (ne,) rows of
+    ``params`` (nmat, NMP), whose ``MP_E``, ``MP_NU`` give the stiffness; ``elems`` int ids.
+
+    Returns ``ke`` (nk, 24, 24) N/m, ``kxo`` (nk, 8, 3) m, ``kdn`` (nk, 8, 3) 1/m and ``kid``
+    (ne,) int64: the table of each element, -1 outside ``elems`` (those keep the Gauss-point
+    path).
+    """
+    ne = conn.shape[0]
+    elems = np.asarray(elems, dtype=np.int64)
+    kid = np.full(ne, -1, dtype=np.int64)
+    pair = np.stack([geo[elems], elem_mat[elems]], axis=1).reshape(-1, 2)
+    _, first, inv = np.unique(pair, axis=0, return_index=True, return_inverse=True)
+    kid[elems] = inv.ravel()
+    nk = first.size
+    ke = np.empty((nk, 24, 24))
+    kxo = np.empty((nk, 8, 3))
+    kdn = np.empty((nk, 8, 3))
+    for k, j in enumerate(first):
+        e = elems[j]
+        t = geo[e]
+        p = params[elem_mat[e]]
+        hex_stiffness(dN[t], wdet[e], p[MP_E], p[MP_NU], ke[k])
+        kxo[k] = X[conn[e]] - X[conn[e, 0]]
+        kdn[k] = np.einsum("g,gai->ai", wdet[e], dN[t]) / wdet[e].sum()
+    return ke, kxo, kdn, kid
 
 
 # ---------------------------------------------------------------------------- mass

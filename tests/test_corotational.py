@@ -1,0 +1,155 @@
+"""Tests of the corotational linear hexahedron of elastic materials (kernels/hex8.py:
+``polar_rotation``, ``corot_local``, ``corot_global``, ``corot_tables`` and their path in the force
+kernel) against numpy/scipy references and the total-Lagrangian element."""
+import numpy as np
+import pytest
+import scipy.linalg
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.spatial.transform import Rotation
+
+import naive_hex8 as nv
+from dr_masonry.kernels import forces, hex8
+from dr_masonry.kernels.plastic_damage import NMS
+from dr_masonry.materials.plastic_damage import PlasticDamage
+from test_hex8 import box_mesh, distorted_element
+
+E, NU = 3e10, 0.2
+
+
+def _forces(U, X, conn, corot=True, shared=True):
+    """Element forces (ne, 8, 3) N and energies (ne,) J of an elastic mesh: the corotational
+    path of a run (``corot``) or every element at its Gauss points."""
+    ne = conn.shape[0]
+    geom = hex8.hex_geometry_shared if shared else hex8.hex_geometry
+    dN, geo, wdet, h = geom(X, conn)
+    params = PlasticDamage.elastic(E, NU, 2000.0).params_array()[None, :]
+    emat = np.zeros(ne, dtype=np.int64)
+    tables = (hex8.corot_tables(X, conn, dN, geo, wdet, emat, params, np.arange(ne))
+              if corot else None)
+    f = np.full((ne, 8, 3), np.nan)
+    en = np.full(ne, np.nan)
+    s = np.zeros((ne, 8, NMS))
+    forces.hex_forces(np.ascontiguousarray(U, dtype=float), conn, np.arange(ne), dN, geo, wdet,
+                      h, emat, params, s, s.copy(), np.zeros(ne, np.uint8), np.zeros(ne, np.uint8),
+                      f, en, corot=tables)
+    return f, en
+
+
+def _reference(xe, ue):
+    """numpy/scipy corotational element: rotation of the polar decomposition of the
+    volume-averaged F (naive Gauss rule), K of the naive total-Lagrangian element."""
+    dn, wd = nv.geometry(xe)
+    F = np.eye(3) + sum(w * ue.T @ d for w, d in zip(wd, dn)) / wd.sum()
+    R, _ = scipy.linalg.polar(F)
+    x = xe + ue
+    d = ((x - x[0]) @ R - (xe - xe[0])).ravel()
+    fl = nv.element_stiffness(xe, E, NU) @ d
+    return (fl.reshape(8, 3) @ R.T), 0.5 * d @ fl
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.floats(-3.0, 3.0), min_size=3, max_size=3),
+       st.lists(st.floats(-0.3, 0.3), min_size=6, max_size=6))
+def test_polar_rotation_of_a_stretched_rotation(rotvec, stretch):
+    """F = Q S with S symmetric positive definite: the iteration returns Q and det F."""
+    Q = Rotation.from_rotvec(rotvec).as_matrix()
+    a, b, c, d, e, f = stretch
+    S = np.eye(3) + np.array([[a, f, e], [f, b, d], [e, d, c]]) / 2.0
+    F = Q @ S
+    R = np.empty((3, 3))
+    det = hex8.polar_rotation(*F.ravel(), R)
+    assert det == pytest.approx(np.linalg.det(F), rel=1e-12)
+    np.testing.assert_allclose(R, Q, rtol=0, atol=1e-12)
+
+
+def test_polar_rotation_of_an_inverted_gradient_is_not_written():
+    R = np.full((3, 3), 7.0)
+    assert hex8.polar_rotation(1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, -0.5, R) < 0.0
+    assert np.all(R == 7.0)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_forces_match_numpy_reference(seed):
+    """Distorted elements, one table each, a large rotation plus strains of 1e-3: the kernel's
+    forces and energy are the numpy corotational element's."""
+    rng = np.random.default_rng(seed)
+    xs = [distorted_element(rng) + [3.0 * k, 0.0, 0.0] for k in range(3)]
+    X = np.concatenate(xs)
+    conn = np.arange(24, dtype=np.int64).reshape(3, 8)
+    Q = Rotation.from_rotvec(rng.normal(size=3)).as_matrix()
+    U = (X @ Q.T - X) + rng.uniform(-1e-3, 1e-3, X.shape) + rng.normal(size=3)
+    f, en = _forces(U, X, conn, shared=False)
+    for e in range(3):
+        fr, er = _reference(X[conn[e]], U[conn[e]])
+        np.testing.assert_allclose(f[e], fr, rtol=0, atol=1e-9 * np.abs(fr).max())
+        assert en[e] == pytest.approx(er, rel=1e-9)
+
+
+def test_rigid_motion_is_force_free_and_forces_rotate():
+    """A 100-element wall of shared tables (two force tasks) turned by 1.2 rad and moved: no
+    force, no energy; a rotated stretch gives the rotated forces of the stretch alone."""
+    rng = np.random.default_rng(4)
+    X, conn = box_mesh((10, 2, 5), (2.0, 0.2, 1.0))
+    Q = Rotation.from_rotvec(1.2 * np.array([0.6, -0.48, 0.64])).as_matrix()
+    U = (X @ Q.T - X) + [3.0, -1.0, 2.0]
+    f, en = _forces(U, X, conn)
+    assert np.abs(f).max() < 1e-9 * E * 0.2 ** 2
+    assert np.abs(en).max() < 1e-9 * E * 0.2 ** 3
+    A = rng.uniform(-1e-4, 1e-4, (3, 3))
+    A = 0.5 * (A + A.T)   # a pure stretch: no rotation of its own
+    fA, enA = _forces(X @ A.T, X, conn)
+    fQA, enQA = _forces(X @ (Q @ (np.eye(3) + A)).T - X, X, conn)
+    np.testing.assert_allclose(fQA, fA @ Q.T, rtol=0, atol=1e-9 * np.abs(fA).max())
+    np.testing.assert_allclose(enQA, enA, rtol=1e-8)
+
+
+def test_agrees_with_total_lagrangian_element_to_first_order():
+    """Under a 0.7 rad rotation and strains eps, the corotational and the total-Lagrangian
+    (St.Venant-Kirchhoff) elements differ by O(eps) relatively: 10 x smaller strains, 10 x
+    smaller relative difference."""
+    rng = np.random.default_rng(7)
+    X, conn = box_mesh((4, 2, 2), (0.8, 0.2, 0.3))
+    X = X + rng.uniform(-0.01, 0.01, X.shape)
+    Q = Rotation.from_rotvec([0.0, 0.7, 0.0]).as_matrix()
+    B = rng.uniform(-1.0, 1.0, X.shape)
+    rel = []
+    for eps in (1e-3, 1e-4):
+        U = (X + eps * B) @ Q.T - X
+        fc, ec = _forces(U, X, conn)
+        ft, et = _forces(U, X, conn, corot=False)
+        rel.append(np.abs(fc - ft).max() / np.abs(ft).max())
+        assert ec.sum() == pytest.approx(et.sum(), rel=30 * eps)
+    assert rel[0] < 30 * 1e-3
+    assert 5.0 < rel[0] / rel[1] < 20.0
+
+
+def test_inverted_element_gives_nan_for_the_guards():
+    X, conn = box_mesh((1, 1, 1))
+    U = np.zeros_like(X)
+    U[:, 2] = -2.0 * X[:, 2]   # z -> -z: turned inside out
+    f, en = _forces(U, X, conn)
+    assert np.all(np.isnan(f)) and np.isnan(en[0])
+
+
+def test_tables_one_per_shape_and_material():
+    """Translated copies share a table; another material or shape gets its own; elements not
+    listed keep the Gauss-point path (-1)."""
+    xe, c1 = box_mesh((1, 1, 1), (0.2, 0.2, 0.2))
+    xe = xe[c1[0]]
+    X = np.concatenate([xe, xe + [0.3, 0.0, 0.0], xe * [1.0, 1.0, 1.5] + [0.6, 0.0, 0.0]])
+    conn = np.arange(24, dtype=np.int64).reshape(3, 8)   # element 2 a taller shape
+    dN, geo, wdet, _ = hex8.hex_geometry_shared(X, conn)
+    params = np.stack([PlasticDamage.elastic(E, NU, 2000.0).params_array(),
+                       PlasticDamage.elastic(2 * E, NU, 2000.0).params_array()])
+    conn4 = np.concatenate([conn, conn[:1]])   # element 3: element 0 in the second material
+    emat = np.array([0, 0, 0, 1])
+    ke, kxo, kdn, kid = hex8.corot_tables(X, conn4, dN, np.r_[geo, geo[0]],
+                                          np.concatenate([wdet, wdet[:1]]), emat, params,
+                                          np.array([0, 1, 3]))
+    assert kid[0] == kid[1] and kid[2] == -1 and kid[3] not in (-1, kid[0])
+    np.testing.assert_allclose(ke[kid[3]], 2 * ke[kid[0]], rtol=1e-14)
+    np.testing.assert_allclose(ke[kid[0]], nv.element_stiffness(X[conn[0]], E, NU),
+                               rtol=0, atol=1e-9 * np.abs(ke[kid[0]]).max())
+    np.testing.assert_allclose(kdn[kid[0]].sum(axis=0), 0.0, atol=1e-12)
+    np.testing.assert_allclose(kxo[kid[0]], X[conn[0]] - X[conn[0, 0]])
