@@ -3,7 +3,8 @@
 Measures, on in-plane running-bond walls of the reference brick (mesh 4 x 2 x 1 per brick:
 along, thickness, height) built by ``dr_masonry.geometry.add_wall``:
 
-* ``hex_forces`` (the force kernel with no contact points): ns per element-step, elastic material (``PlasticDamage.elastic``) and the
+* ``hex_forces`` (the force kernel with no contact points): ns per element-step, elastic material (``PlasticDamage.elastic``: the
+  corotational elements of a run, and the same material at its Gauss points) and the
   reference plastic-damage material, with strains in the elastic range and with strains that make
   every Gauss point plastic and damaged (the fraction of damaged Gauss points is printed);
 * ``contact_forces`` (the force kernel with no elements): ns per contact-point-step, joints elastic and joints damaged (opened);
@@ -94,11 +95,20 @@ def hex_args(sim, U, elastic, virgin=True):
             np.zeros(me.conn.shape[0]))
 
 
-def hex_call(args):
-    """(force kernel, its arguments) for ``hex_forces(*args)``: the call that the wrapper
-    :func:`dr_masonry.kernels.forces.hex_forces` makes, its packing kept out of the timing."""
+def corot(sim, args):
+    """The corotational tables that a run gives the elements of ``hex_args``' elastic material."""
+    from dr_masonry.kernels.hex8 import corot_tables
+    conn, dN, geo, wdet, emat, params = (args[i] for i in (1, 3, 4, 5, 7, 8))
+    return corot_tables(sim.model.nodes, conn, dN, geo, wdet, emat, params,
+                        np.arange(conn.shape[0]))
+
+
+def hex_call(args, tables=None):
+    """(force kernel, its arguments) for ``hex_forces(*args, corot=tables)``: the call that the
+    wrapper :func:`dr_masonry.kernels.forces.hex_forces` makes, its packing kept out of the
+    timing."""
     from dr_masonry.kernels.forces import element_and_contact_forces, hex_only_args
-    return element_and_contact_forces, hex_only_args(*args)
+    return element_and_contact_forces, hex_only_args(*args, corot=tables)
 
 
 def contact_call(args):
@@ -162,12 +172,13 @@ def steady(params):
         ne, nc = sim.model.elements.shape[0], sim.cont.slave.shape[0]
         cases = []
         for label, elastic, strain, virgin in (
-                ("hex elastic material", True, ELASTIC_STRAIN, True),
+                ("hex elastic material (corotational)", True, ELASTIC_STRAIN, True),
+                ("hex elastic material, Gauss points", True, ELASTIC_STRAIN, True),
                 ("hex reference, elastic range", False, ELASTIC_STRAIN, True),
                 ("hex reference, elastic range, full update", False, ELASTIC_STRAIN, False),
                 ("hex reference, plastic+damaged", False, PLASTIC_STRAIN, True)):
             args = hex_args(sim, displacement(sim, strain, 0.0), elastic, virgin)
-            fn, call = hex_call(args)
+            fn, call = hex_call(args, corot(sim, args) if "corotational" in label else None)
             fn(*call)
             s_new = args[10]
             frac = float(np.mean((s_new[:, :, MS_DT] > 0) | (s_new[:, :, MS_DC] > 0))) if not elastic else 0.0

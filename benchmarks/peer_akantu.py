@@ -9,7 +9,8 @@ For each ``sizes`` entry ``nx x ny x nz`` a single block of nx x ny x nz cubic h
   ``benchmarks/out/``; ``SolidMechanicsModel.initFull(_analysis_method=_explicit_lumped_mass)``,
   and one explicit step is ``model.solveStep()`` (central differences, lumped mass, 2x2x2 Gauss
   points). Variants ``akantu``: ``small`` is Akantu's default small-strain elastic material,
-  ``finite`` the same with ``finite_deformation = true`` (Green-Lagrange strain, like ours);
+  ``finite`` the same with ``finite_deformation = true`` (Green-Lagrange strain, total
+  Lagrangian);
 * dr_masonry: ``Model().add_box(origin, size, PlasticDamage.elastic(E, nu, rho), (nx, ny, nz))``
   and ``Simulation.build()``. One explicit step is one iteration of the production loop
   ``kernels.relaxation.relax`` (``internal_forces``: ``hex_forces`` + gather, residual, the
@@ -19,14 +20,17 @@ For each ``sizes`` entry ``nx x ny x nz`` a single block of nx x ny x nz cubic h
   cost is the one the target is about; with the viscous scheme at ``alpha = 0`` it is the
   undamped central-difference scheme, and with the fictitious masses replaced by the physical
   lumped masses (``minv = dt^2 / m``; V is then the displacement per step) it is the same
-  time integrator as Akantu's, which the physics check below verifies. ``hex_forces`` alone is
-  timed too, with the argument builder of ``benchmarks/kernels.py`` (its elastic material).
+  time integrator as Akantu's, which the physics check below verifies. An elastic material's
+  elements are corotational linear hexahedra in a run (``kernels/hex8.py``: exact under rigid
+  motion, equal to either Akantu variant to first order in the strain). ``hex_forces`` alone is
+  timed too, with the argument builder of ``benchmarks/kernels.py`` (its elastic material, the
+  corotational tables of a run).
 
 Physics check (per size and Akantu variant): both codes start from U = 0 and the same smooth
 initial velocity field and take ``check_steps`` steps of dt = ``dt_factor`` x Akantu's stable
 step; printed are the relative differences of the lumped masses, of the displacements after
-those steps and of the internal forces at Akantu's final displacement (our Green-Lagrange
-kinematics differ from Akantu's ``small`` variant by O(strain), about 1e-6 here).
+those steps and of the internal forces at Akantu's final displacement (our corotational
+kinematics differ from both variants by O(strain): 1e-7 to 6e-6 here).
 
 Timings: one thread on each side (``numba.set_num_threads(1)``; the akantu 5.0.7 wheel is built
 without MPI and links no OpenMP or TBB runtime). Per case: best and median wall time of
@@ -244,7 +248,8 @@ def run_size(aka, div, params, phase, rows, checks):
         add(f"akantu {variant} solveStep", *timed_cpu(model.solveStep, (), params), ne)
         del model, mesh
     d.V[:] = dt * v0
-    add("dr_masonry hex_forces", *timed_cpu(*bench.hex_call(bench.hex_args(sim, d.U, True)),
+    hargs = bench.hex_args(sim, d.U, True)
+    add("dr_masonry hex_forces", *timed_cpu(*bench.hex_call(hargs, bench.corot(sim, hargs)),
                                             params), ne)
     args = relax_args(sim, params["relax_iters"], sim.options.ring)   # the production step
     add("dr_masonry relax step", *timed_cpu(relax, args, params), ne * params["relax_iters"])

@@ -202,7 +202,8 @@ class PlasticDamage:
 
     @classmethod
     def elastic(cls, E, nu, density):
-        """A material that stays linear elastic (E Pa, nu, density kg/m^3)."""
+        """A material that stays linear elastic (E Pa, nu, density kg/m^3); a run computes its
+        elements as corotational linear hexahedra (docs/internals.md)."""
         return cls(E=E, nu=nu, density=density, stays_elastic=True)
 
     def with_changes(self, **kw):
