@@ -40,6 +40,23 @@ class HexMeshError(ValueError):
 
 
 # ---------------------------------------------------------------------------- geometry
+@ijit
+def inverse_transpose3(m00, m01, m02, m10, m11, m12, m20, m21, m22):
+    """det M and the entries of M^-T (row by row) of a 3 x 3 matrix M, as cofactors / det.
+
+    Returns (det, t00, t01, t02, t10, t11, t12, t20, t21, t22); inf or NaN entries where
+    det = 0 (the caller checks det).
+    """
+    c00 = m11 * m22 - m12 * m21
+    c01 = m12 * m20 - m10 * m22
+    c02 = m10 * m21 - m11 * m20
+    det = m00 * c00 + m01 * c01 + m02 * c02
+    return (det, c00 / det, c01 / det, c02 / det,
+            (m02 * m21 - m01 * m22) / det, (m00 * m22 - m02 * m20) / det,
+            (m01 * m20 - m00 * m21) / det, (m01 * m12 - m02 * m11) / det,
+            (m02 * m10 - m00 * m12) / det, (m00 * m11 - m01 * m10) / det)
+
+
 @jit
 def hex_gauss_derivatives(xe, g, dng):
     """Reference derivatives at Gauss point ``g`` of the hexahedron with corners ``xe`` (8, 3) m.
@@ -64,18 +81,9 @@ def hex_gauss_derivatives(xe, g, dng):
         j20 += xe[a, 2] * d0
         j21 += xe[a, 2] * d1
         j22 += xe[a, 2] * d2
-    c00 = j11 * j22 - j12 * j21
-    c01 = j12 * j20 - j10 * j22
-    c02 = j10 * j21 - j11 * j20
-    det = j00 * c00 + j01 * c01 + j02 * c02
-    # inverse K = J^-1 (K[k, i] = dxi_k / dX_i), as cofactors / det
-    k00, k10, k20 = c00 / det, c01 / det, c02 / det
-    k01 = (j02 * j21 - j01 * j22) / det
-    k11 = (j00 * j22 - j02 * j20) / det
-    k21 = (j01 * j20 - j00 * j21) / det
-    k02 = (j01 * j12 - j02 * j11) / det
-    k12 = (j02 * j10 - j00 * j12) / det
-    k22 = (j00 * j11 - j01 * j10) / det
+    # inverse K = J^-1 = (J^-T)^T (K[k, i] = dxi_k / dX_i)
+    det, k00, k10, k20, k01, k11, k21, k02, k12, k22 = inverse_transpose3(
+        j00, j01, j02, j10, j11, j12, j20, j21, j22)
     for a in range(8):
         d0, d1, d2 = dng[a, 0], dng[a, 1], dng[a, 2]
         dng[a, 0] = d0 * k00 + d1 * k10 + d2 * k20
@@ -209,16 +217,13 @@ def hex_geometry_shared(X, conn):
 
 # ---------------------------------------------------------------------------- internal forces
 @ijit
-def hex_gauss_strain(ue, dng, F, eps):
-    """Deformation gradient ``F`` (3, 3) and Green-Lagrange strain ``eps`` (6,) at one Gauss point.
-
-    ``ue`` (8, 3) m nodal displacements, ``dng`` (8, 3) 1/m reference derivatives.
-    ``eps`` in Voigt order [xx, yy, zz, yz, xz, xy], engineering shears.
-    """
-    h00 = h01 = h02 = h10 = h11 = h12 = h20 = h21 = h22 = 0.0  # H = grad u = F - I
+def displacement_gradient(ue, dn, v0, v1, v2):
+    """H = sum_a (u_a - v) (x) dn_a (row by row, 9 values) of nodal displacements ``ue`` (8, 3) m
+    less a common vector ``v`` (m; zero for the plain gradient) and derivatives ``dn`` (8, 3) 1/m."""
+    h00 = h01 = h02 = h10 = h11 = h12 = h20 = h21 = h22 = 0.0
     for a in range(8):
-        d0, d1, d2 = dng[a, 0], dng[a, 1], dng[a, 2]
-        u0, u1, u2 = ue[a, 0], ue[a, 1], ue[a, 2]
+        d0, d1, d2 = dn[a, 0], dn[a, 1], dn[a, 2]
+        u0, u1, u2 = ue[a, 0] - v0, ue[a, 1] - v1, ue[a, 2] - v2
         h00 += u0 * d0
         h01 += u0 * d1
         h02 += u0 * d2
@@ -228,6 +233,17 @@ def hex_gauss_strain(ue, dng, F, eps):
         h20 += u2 * d0
         h21 += u2 * d1
         h22 += u2 * d2
+    return h00, h01, h02, h10, h11, h12, h20, h21, h22
+
+
+@ijit
+def hex_gauss_strain(ue, dng, F, eps):
+    """Deformation gradient ``F`` (3, 3) and Green-Lagrange strain ``eps`` (6,) at one Gauss point.
+
+    ``ue`` (8, 3) m nodal displacements, ``dng`` (8, 3) 1/m reference derivatives.
+    ``eps`` in Voigt order [xx, yy, zz, yz, xz, xy], engineering shears.
+    """
+    h00, h01, h02, h10, h11, h12, h20, h21, h22 = displacement_gradient(ue, dng, 0.0, 0.0, 0.0)
     eps[0] = h00 + 0.5 * (h00 * h00 + h10 * h10 + h20 * h20)
     eps[1] = h11 + 0.5 * (h01 * h01 + h11 * h11 + h21 * h21)
     eps[2] = h22 + 0.5 * (h02 * h02 + h12 * h12 + h22 * h22)
@@ -370,23 +386,15 @@ def polar_rotation(f00, f01, f02, f10, f11, f12, f20, f21, f22, R):
     Newton's iteration R <- (R + R^-T) / 2 from R = F. Returns det F; for det F <= 0 (an
     inverted element) ``R`` is not written.
     """
-    det = (f00 * (f11 * f22 - f12 * f21) + f01 * (f12 * f20 - f10 * f22)
-           + f02 * (f10 * f21 - f11 * f20))
-    if not det > 0.0:
-        return det
     r00, r01, r02, r10, r11, r12, r20, r21, r22 = f00, f01, f02, f10, f11, f12, f20, f21, f22
-    d = det
-    for _ in range(POLAR_MAX):
-        # R^-T = cofactor(R) / det R
-        c00 = (r11 * r22 - r12 * r21) / d
-        c01 = (r12 * r20 - r10 * r22) / d
-        c02 = (r10 * r21 - r11 * r20) / d
-        c10 = (r02 * r21 - r01 * r22) / d
-        c11 = (r00 * r22 - r02 * r20) / d
-        c12 = (r01 * r20 - r00 * r21) / d
-        c20 = (r01 * r12 - r02 * r11) / d
-        c21 = (r02 * r10 - r00 * r12) / d
-        c22 = (r00 * r11 - r01 * r10) / d
+    det = 0.0
+    for it in range(POLAR_MAX):
+        d, c00, c01, c02, c10, c11, c12, c20, c21, c22 = inverse_transpose3(
+            r00, r01, r02, r10, r11, r12, r20, r21, r22)
+        if it == 0:
+            det = d
+            if not det > 0.0:
+                return det
         change = max(abs(c00 - r00), abs(c01 - r01), abs(c02 - r02), abs(c10 - r10),
                      abs(c11 - r11), abs(c12 - r12), abs(c20 - r20), abs(c21 - r21),
                      abs(c22 - r22))
@@ -395,8 +403,6 @@ def polar_rotation(f00, f01, f02, f10, f11, f12, f20, f21, f22, R):
         r20, r21, r22 = 0.5 * (r20 + c20), 0.5 * (r21 + c21), 0.5 * (r22 + c22)
         if 0.5 * change <= POLAR_TOL:
             break
-        d = (r00 * (r11 * r22 - r12 * r21) + r01 * (r12 * r20 - r10 * r22)
-             + r02 * (r10 * r21 - r11 * r20))
     R[0, 0], R[0, 1], R[0, 2] = r00, r01, r02
     R[1, 0], R[1, 1], R[1, 2] = r10, r11, r12
     R[2, 0], R[2, 1], R[2, 2] = r20, r21, r22
@@ -417,19 +423,9 @@ def corot_local(ue, xo, dnc, R, dl):
     ``ue`` (8, 3) m nodal displacements; ``xo`` (8, 3) m corner offsets X_a - X_0; ``dnc``
     (8, 3) 1/m volume-averaged dN_a/dX. det F <= 0 (an inverted element): nothing written.
     """
-    h00 = h01 = h02 = h10 = h11 = h12 = h20 = h21 = h22 = 0.0
-    for a in range(1, 8):   # sum_a dnc_a = 0: displacements relative to corner 0
-        d0, d1, d2 = dnc[a, 0], dnc[a, 1], dnc[a, 2]
-        u0, u1, u2 = ue[a, 0] - ue[0, 0], ue[a, 1] - ue[0, 1], ue[a, 2] - ue[0, 2]
-        h00 += u0 * d0
-        h01 += u0 * d1
-        h02 += u0 * d2
-        h10 += u1 * d0
-        h11 += u1 * d1
-        h12 += u1 * d2
-        h20 += u2 * d0
-        h21 += u2 * d1
-        h22 += u2 * d2
+    # sum_a dnc_a = 0: displacements relative to corner 0 (a rigid translation drops out exactly)
+    h00, h01, h02, h10, h11, h12, h20, h21, h22 = displacement_gradient(ue, dnc, ue[0, 0], ue[0, 1],
+                                                                        ue[0, 2])
     det = polar_rotation(1.0 + h00, h01, h02, h10, 1.0 + h11, h12, h20, h21, 1.0 + h22, R)
     if not det > 0.0:
         return det
