@@ -281,10 +281,11 @@ def hex_chunk(lo, hi, U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old
     eps = np.empty(6)
     sig = np.empty(6)
     # corotational elements: local displacements, rotations and table of each slot of the task
-    dl = np.empty((hi - lo, 24))
-    fl = np.empty((hi - lo, 24))
-    rot = np.empty((hi - lo, 3, 3))
-    slot = np.full(hi - lo, -1, dtype=np.int64)
+    ns = hi - lo if ke.shape[0] > 0 else 0   # no scratch where no element uses the path
+    dl = np.empty((ns, 24))
+    fl = np.empty((ns, 24))
+    rot = np.empty((ns, 3, 3))
+    slot = np.full(ns, -1, dtype=np.int64)
     for k in range(lo, hi):
         e = active[k]
         fe = f_elem[e]
@@ -347,10 +348,10 @@ def hex_chunk(lo, hi, U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old
             dirty[e] = 0
         energy[e] = en
     j = 0
-    while j < hi - lo:   # K d of each run of slots with one table: one matrix product (BLAS)
+    while j < ns:   # K d of each run of slots with one table: one matrix product (BLAS)
         t = slot[j]
         j1 = j + 1
-        while j1 < hi - lo and slot[j1] == t:
+        while j1 < ns and slot[j1] == t:
             j1 += 1
         if t >= 0:
             np.dot(dl[j:j1], ke[t], fl[j:j1])   # K symmetric: (K d)^T = d^T K
