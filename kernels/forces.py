@@ -57,6 +57,11 @@ def _none(*shape, dtype=np.float64):
     return np.zeros(shape, dtype=dtype)
 
 
+def no_corot(ne):
+    """Corotational tables (ke, kxo, kdn, kid) of ``ne`` elements none of which uses them."""
+    return (_none(0, 24, 24), _none(0, 8, 3), _none(0, 8, 3), np.full(ne, -1, dtype=np.int64))
+
+
 #: an empty contact set and an empty element set (the other argument of the force kernel)
 NO_CONTACTS = Cont(_none(0, dtype=np.int64), _none(0, 4, dtype=np.int64), _none(0, 2), _none(0),
                    _none(0, dtype=np.int64), _none(1, NJP), _none(0, 3), _none(0, NJS),
@@ -65,14 +70,8 @@ NO_CONTACTS = Cont(_none(0, dtype=np.int64), _none(0, 4, dtype=np.int64), _none(
 NO_ELEMENTS = Mesh(_none(0, 8, dtype=np.int64), _none(0, dtype=np.int64), _none(0, 8, 8, 3),
                    _none(0, dtype=np.int64), _none(0, 8), _none(0), _none(0, dtype=np.int64),
                    _none(1, 1), _none(0, 8, NMS), _none(0, 8, NMS), _none(0, dtype=np.uint8),
-                   _none(0, dtype=np.uint8), _none(0, 24, 24), _none(0, 8, 3), _none(0, 8, 3),
-                   _none(0, dtype=np.int64), _none(0, 8, 3), _none(0), _none(1, dtype=np.int64),
-                   _none(0, dtype=np.int64))
-
-
-def no_corot(ne):
-    """Corotational tables (ke, kxo, kdn, kid) of ``ne`` elements none of which uses them."""
-    return (_none(0, 24, 24), _none(0, 8, 3), _none(0, 8, 3), np.full(ne, -1, dtype=np.int64))
+                   _none(0, dtype=np.uint8), *no_corot(0), _none(0, 8, 3), _none(0),
+                   _none(1, dtype=np.int64), _none(0, dtype=np.int64))
 
 
 def hex_only_args(U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old, s_new, pristine,

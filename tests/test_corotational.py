@@ -9,31 +9,17 @@ from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 import naive_hex8 as nv
-from dr_masonry.kernels import forces, hex8
-from dr_masonry.kernels.plastic_damage import NMS
+from dr_masonry.kernels import hex8
 from dr_masonry.materials.plastic_damage import PlasticDamage
-from test_hex8 import box_mesh, distorted_element
+from test_hex8 import box_mesh, distorted_element, run_forces
 
 E, NU = 3e10, 0.2
 
 
-def _forces(U, X, conn, corot=True, shared=True):
+def _forces(U, X, conn, corot=True):
     """Element forces (ne, 8, 3) N and energies (ne,) J of an elastic mesh: the corotational
     path of a run (``corot``) or every element at its Gauss points."""
-    ne = conn.shape[0]
-    geom = hex8.hex_geometry_shared if shared else hex8.hex_geometry
-    dN, geo, wdet, h = geom(X, conn)
-    params = PlasticDamage.elastic(E, NU, 2000.0).params_array()[None, :]
-    emat = np.zeros(ne, dtype=np.int64)
-    tables = (hex8.corot_tables(X, conn, dN, geo, wdet, emat, params, np.arange(ne))
-              if corot else None)
-    f = np.full((ne, 8, 3), np.nan)
-    en = np.full(ne, np.nan)
-    s = np.zeros((ne, 8, NMS))
-    forces.hex_forces(np.ascontiguousarray(U, dtype=float), conn, np.arange(ne), dN, geo, wdet,
-                      h, emat, params, s, s.copy(), np.zeros(ne, np.uint8), np.zeros(ne, np.uint8),
-                      f, en, corot=tables)
-    return f, en
+    return run_forces(U, X, conn, E, NU, corot=corot)[:2]
 
 
 def _reference(xe, ue):
@@ -71,7 +57,7 @@ def test_polar_rotation_of_an_inverted_gradient_is_not_written():
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_forces_match_numpy_reference(seed):
-    """Distorted elements, one table each, a large rotation plus strains of 1e-3: the kernel's
+    """Distorted elements (one table each), a large rotation plus strains of 1e-3: the kernel's
     forces and energy are the numpy corotational element's."""
     rng = np.random.default_rng(seed)
     xs = [distorted_element(rng) + [3.0 * k, 0.0, 0.0] for k in range(3)]
@@ -79,7 +65,7 @@ def test_forces_match_numpy_reference(seed):
     conn = np.arange(24, dtype=np.int64).reshape(3, 8)
     Q = Rotation.from_rotvec(rng.normal(size=3)).as_matrix()
     U = (X @ Q.T - X) + rng.uniform(-1e-3, 1e-3, X.shape) + rng.normal(size=3)
-    f, en = _forces(U, X, conn, shared=False)
+    f, en = _forces(U, X, conn)
     for e in range(3):
         fr, er = _reference(X[conn[e]], U[conn[e]])
         np.testing.assert_allclose(f[e], fr, rtol=0, atol=1e-9 * np.abs(fr).max())

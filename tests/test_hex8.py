@@ -46,19 +46,22 @@ def _flags(ne):
     return np.zeros(ne, np.uint8), np.zeros(ne, np.uint8)
 
 
-def run_forces(U, X, conn, E, nu, elem_mat=None, params=None):
-    """Element forces, energies and nodal forces of an elastic mesh."""
+def run_forces(U, X, conn, E, nu, elem_mat=None, params=None, corot=False):
+    """Element forces, energies and nodal forces of an elastic mesh (``corot``: every element on
+    the corotational path of a run, else at its Gauss points)."""
     ne = conn.shape[0]
     dN, geo, wdet, h = hex8.hex_geometry_shared(X, conn)
     if params is None:
         params = elastic_params(E, nu)[None, :]
         elem_mat = np.zeros(ne, dtype=np.int64)
+    tables = (hex8.corot_tables(X, conn, dN, geo, wdet, elem_mat, params, np.arange(ne))
+              if corot else None)
     s_old = np.zeros((ne, 8, NMS))
     s_new = np.zeros((ne, 8, NMS))
     f_elem = np.full((ne, 8, 3), np.nan)
     energy = np.full(ne, np.nan)
     forces.hex_forces(np.ascontiguousarray(U, dtype=float), conn, np.arange(ne), dN, geo, wdet, h,
-                    elem_mat, params, s_old, s_new, *_flags(ne), f_elem, energy)
+                    elem_mat, params, s_old, s_new, *_flags(ne), f_elem, energy, corot=tables)
     f_node = np.zeros_like(X)
     np.add.at(f_node, conn.ravel(), f_elem.reshape(-1, 3))
     return f_elem, energy, f_node
