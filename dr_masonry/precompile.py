@@ -50,7 +50,7 @@ def callee_signatures(mesh, cont, dyn):
                   ("residual", (dyn, lam, rpres)),
                   ("norms", (dyn, lam, rpres)),
                   ("update_nodes", (dyn, lam, flag, scheme, lam, lam, lam, lam, lam, lam, parts)),
-                  ("largest_displacement", (dyn,)),
+                  ("worst_place", (dyn, lam)),
                   ("stored_energy", (mesh, cont)),     # also callees of ``internal_forces``,
                   ("gather_pair", (hbuf, mesh.ptr, mesh.rows, cont.fbuf, cont.ptr, cont.rows,
                                    dyn.fint))],        # cached before the worker reaches it
@@ -101,10 +101,10 @@ def ensure_compiled(mesh, cont, dyn):
                                       stdout=subprocess.DEVNULL, stderr=err)
             try:
                 compile_group(groups["nodes"])
+                rc = worker.wait()
             except BaseException:   # Ctrl-C, or a compile error that the run will report
                 worker.kill()
                 raise
-            rc = worker.wait()
             if rc != 0:
                 err.seek(0)
                 warnings.warn(f"kernel compile worker failed (exit {rc}), compiling here instead: "

@@ -22,8 +22,8 @@ from .kernels import relaxation as R
 from .kernels.assembly import node_row_map
 from .kernels.contact_forces import contact_rowsum
 from .kernels.forces import Cont, Mesh
-from .kernels.hex8 import (corot_tables, hex_geometry_shared, lumped_mass, pristine_elements,
-                           stiffness_rowsum)
+from .kernels.hex8 import (corot_tables, hex_geometry_shared, inverted_element, lumped_mass,
+                           pristine_elements, stiffness_rowsum)
 from .kernels.joint_law import JS_D, JS_DISS, JS_DISSF
 from .kernels.plastic_damage import MP_ELASTIC, MP_HMAX, MS_DC, MS_DISS, MS_DT
 from .materials import JointLaw, PlasticDamage
@@ -848,13 +848,13 @@ class Simulation:
         elapsed = time.perf_counter() - t0
         status = int(info[R.I_STATUS])
         if status in (R.ST_NONFINITE, R.ST_RUNAWAY):
+            inverted = self._inverted() if status == R.ST_NONFINITE else ""
             self._restore(snap)
-            node = int(info[R.I_WORST])
             what = "non-finite force or displacement" if status == R.ST_NONFINITE else \
                 f"run-away displacement {info[R.I_QTY]:.3e} m (limit {0.5 * self.size:.3e} m)"
-            self._fail(f"increment {self.increment + 1} of stage {stage.name!r}: {what} at node "
-                       f"{node} (block {self.model.node_block[node]}) after {int(info[R.I_ITERS])} "
-                       f"iterations; the time step is unstable (safety factor {o.safety}) or the "
+            self._fail(f"increment {self.increment + 1} of stage {stage.name!r}: {what} at "
+                       f"{self._place(info)} after {int(info[R.I_ITERS])} iterations{inverted}; "
+                       f"the time step is unstable (safety factor {o.safety}) or the "
                        f"structure lost equilibrium (collapse under load control)")
         if status == R.ST_UNSTABLE:
             self._restore(snap)
@@ -986,6 +986,28 @@ class Simulation:
                                  f"puts no force on the controlled DOF {indirect.dof}; control a DOF "
                                  f"that the pattern loads (e.g. a rigid point of the loaded blocks)")
         return ctrl, pc
+
+    def _place(self, info):
+        """The place a relaxation guard named (``info[R.I_WORST]``, ``info[R.I_KIND]``), in
+        words."""
+        i, kind = int(info[R.I_WORST]), int(info[R.I_KIND])
+        if kind == R.WHERE_RP:
+            return f"reference point {self.rigid_points[i].name!r}"
+        if kind == R.WHERE_LOAD:
+            return "the load factor of the indirectly controlled pattern"
+        return f"node {i} (block {self.model.node_block[i]})"
+
+    def _inverted(self):
+        """`` (element e of block b inverted: ...)`` if an active hexahedron has turned inside
+        out in the current displacements (a corotational element then has NaN forces), else
+        ``""``."""
+        mesh = self.mesh
+        bad = inverted_element(self.dyn.X + self.dyn.U, mesh.conn, mesh.active)
+        if bad is None:
+            return ""
+        e, g, det = bad
+        return (f" (element {e} of block {self.model.element_block[e]} inverted: Jacobian "
+                f"determinant {det:.3e} m^3 at Gauss point {g})")
 
     def _fail(self, msg):
         if self.writer is not None:

@@ -133,16 +133,41 @@ def _tables(X, conn, elems):
     wdet = np.empty((nt, 8))
     h = np.empty(nt)
     _hex_geometry(X, sub, dN, wdet, h)
-    bad = ~(wdet > 0.0)
-    if np.any(bad):
-        rows = np.flatnonzero(bad.any(axis=1))
-        t = rows[np.argmin(elems[rows])]  # the first element with a bad table
-        g = int(np.argmax(bad[t]))
-        e = elems[t]
+    bad = _first_bad(~(wdet > 0.0), wdet, elems)
+    if bad is not None:
+        e, g, det = bad
         raise HexMeshError(f"conn: element {e} (nodes {conn[e].tolist()}) has a non-positive "
-                           f"Jacobian det = {wdet[t, g]:.6g} at Gauss point {g} (inverted or "
+                           f"Jacobian det = {det:.6g} at Gauss point {g} (inverted or "
                            f"degenerate hexahedron, or corners not in VTK order)")
     return dN, wdet, h
+
+
+def _first_bad(bad, wdet, elems):
+    """(element, Gauss point, det J) of the lowest element id of ``elems`` (nt,) with a point
+    flagged in ``bad`` (nt, 8) bool, or None."""
+    if not np.any(bad):
+        return None
+    rows = np.flatnonzero(bad.any(axis=1))
+    t = rows[np.argmin(elems[rows])]
+    g = int(np.argmax(bad[t]))
+    return int(elems[t]), g, float(wdet[t, g])
+
+
+def inverted_element(x, conn, elems, chunk=4096):
+    """The first of the elements ``elems`` (int64 ids into ``conn`` (ne, 8)) that is inverted in
+    the configuration ``x`` (n_nodes, 3) m: a finite, non-positive Jacobian determinant at a
+    Gauss point. Returns (element, Gauss point, det J m^3) or None (a diagnosis after a run
+    failed; elements with non-finite corners are skipped)."""
+    for lo in range(0, elems.shape[0], chunk):
+        part = elems[lo:lo + chunk]
+        nt = part.shape[0]
+        dN = np.empty((nt, 8, 8, 3))
+        wdet = np.empty((nt, 8))
+        _hex_geometry(x, conn[part], dN, wdet, np.empty(nt))
+        bad = _first_bad(np.isfinite(wdet) & (wdet <= 0.0), wdet, part)
+        if bad is not None:
+            return bad
+    return None
 
 
 def hex_geometry(X, conn):

@@ -76,7 +76,7 @@ I_STATUS = 1
 I_RESID = 2      # ||r_free|| / reference force at exit
 I_KE = 3         # kinetic energy at exit (fictitious), J
 I_DAMPED = 4     # energy removed by the damping (node DOFs; kinetic: KE at resets), J
-I_WORST = 5      # node (or -1 - reference point) where the guard fired (unstable: fastest node)
+I_WORST = 5      # node, reference point or 0 (see I_KIND) where the guard fired (unstable: fastest node)
 I_QTY = 6        # the offending value (unstable: the Rayleigh quotient (omega dt)^2)
 I_REF = 7        # reference force norm, N
 I_EINT = 8       # stored energy (hexahedra + joints), J
@@ -90,7 +90,13 @@ I_WIN_N = 15     # iterations into the rate window (read and written)
 I_WIN_D = 16     # decrease of log(best ratio) over the last complete window (read and written)
 I_WIN_K = 17     # complete rate windows so far (read and written)
 I_SEG = 18       # iterations of the current span run by earlier calls (set by the caller; see relax)
-N_INFO = 19
+I_KIND = 19      # what I_WORST counts: WHERE_NODE, WHERE_RP or WHERE_LOAD (the load factor)
+N_INFO = 20
+
+# kinds of place a guard names (info[I_KIND])
+WHERE_NODE = 0
+WHERE_RP = 1
+WHERE_LOAD = 2
 
 
 @jit
@@ -336,20 +342,44 @@ def update_nodes(dyn, lam, stale, scheme, c_visc, alpha, ring, keep, c_mix, dt, 
 
 
 @jit
-def largest_displacement(dyn):
-    """(the free DOFs' first non-finite |U|, else their largest, m; its node) for a diagnosis."""
-    umax = -1.0
-    worst = 0
-    for i in range(dyn.U.shape[0]):
+def worst_place(dyn, lam):
+    """Where a guard fired, for its diagnosis: the first non-finite value among the nodes'
+    displacements, the reference points' displacements, the nodes' internal forces (a NaN
+    displacement spreads to its elements' forces first) and the load factor ``lam``; if all are
+    finite, the largest displacement of a free node DOF or a free reference-point translation.
+
+    Returns (value: the non-finite value or the largest |U| m, kind: WHERE_NODE, WHERE_RP or
+    WHERE_LOAD, index: node or reference point, 0 for the load factor)."""
+    n = dyn.U.shape[0]
+    for i in range(n):
         for k in range(3):
-            if dyn.free[i, k] > 0.0:
-                a = abs(dyn.U[i, k])
-                if not np.isfinite(a):
-                    return a, i
-                if a > umax:
-                    umax = a
-                    worst = i
-    return umax, worst
+            if not np.isfinite(dyn.U[i, k]):
+                return dyn.U[i, k], WHERE_NODE, i
+    for p in range(dyn.rpU.shape[0]):
+        for k in range(6):
+            if not np.isfinite(dyn.rpU[p, k]):
+                return dyn.rpU[p, k], WHERE_RP, p
+    for i in range(n):
+        for k in range(3):
+            if not np.isfinite(dyn.fint[i, k]):
+                return dyn.fint[i, k], WHERE_NODE, i
+    if not np.isfinite(lam):
+        return lam, WHERE_LOAD, 0
+    umax = -1.0
+    kind = WHERE_NODE
+    worst = 0
+    for i in range(n):
+        for k in range(3):
+            if dyn.free[i, k] > 0.0 and abs(dyn.U[i, k]) > umax:
+                umax = abs(dyn.U[i, k])
+                worst = i
+    for p in range(dyn.rpU.shape[0]):
+        for k in range(3):
+            if dyn.rpfree[p, k] > 0.0 and abs(dyn.rpU[p, k]) > umax:
+                umax = abs(dyn.rpU[p, k])
+                kind = WHERE_RP
+                worst = p
+    return umax, kind, worst
 
 
 @ijit
@@ -412,7 +442,9 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, ring, tol, ref
         towards a floor above tol) stops with ST_SLOW. ``info[I_LEFT]`` = 0: no budget known,
         no such test.
     u_limit : float
-        run-away guard: any displacement above it (m) stops the loop.
+        run-away guard: a free node DOF's or a free reference-point translation's displacement
+        above it (m) stops the loop (ST_RUNAWAY; non-finite: ST_NONFINITE); ``info[I_WORST]``,
+        ``info[I_KIND]`` name the place (:func:`worst_place`).
     info : (N_INFO,) float64 written.
 
     A call may continue the previous one: ``info[I_SEG]`` > 0 is the number of iterations that
@@ -435,6 +467,7 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, ring, tol, ref
     ke = 0.0
     eint = 0.0
     worst = 0
+    kind = WHERE_NODE
     qty = 0.0
     # viscous damping: Rayleigh quotient with the previous internal force
     fprev = dyn.fint.copy()
@@ -483,14 +516,7 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, ring, tol, ref
             rn, ref = norms(dyn, lam, rpres)
             if not (np.isfinite(rn) and np.isfinite(lam)):
                 status = ST_NONFINITE
-                for i in range(n):
-                    for k in range(3):
-                        if not np.isfinite(dyn.fint[i, k]) or not np.isfinite(dyn.U[i, k]):
-                            worst = i
-                            qty = dyn.fint[i, k]
-                            break
-                    if worst:
-                        break
+                qty, kind, worst = worst_place(dyn, lam)
                 break
             if rn <= tol * max(ref, ref_floor) and its > 1:
                 status = ST_CONVERGED
@@ -639,15 +665,20 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, ring, tol, ref
                 for k in range(3):
                     if dyn.free[i, k] > 0.0:
                         dyn.U[i, k] += dt * dyn.V[i, k]
-            umax = largest_displacement(dyn)[0]
+            umax = worst_place(dyn, lam)[0]
             n_bad = 0 if np.isfinite(umax) else 1
         for p in range(nr):
             for k in range(6):
                 if dyn.rpfree[p, k] > 0.0:
                     dyn.rpU[p, k] += dt * dyn.rpV[p, k]
+                    a = abs(dyn.rpU[p, k])
+                    if not np.isfinite(a):
+                        n_bad += 1
+                    elif k < 3 and a > umax:
+                        umax = a
         place_rigid_nodes(dyn)
         if n_bad > 0 or umax > u_limit:
-            qty, worst = largest_displacement(dyn)
+            qty, kind, worst = worst_place(dyn, lam)
             status = ST_NONFINITE if n_bad > 0 else ST_RUNAWAY
             break
     if it > 0:
@@ -666,6 +697,7 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, ring, tol, ref
     info[I_WIN_D] = win_d
     info[I_WIN_K] = win_k
     info[I_WORST] = worst
+    info[I_KIND] = kind
     info[I_QTY] = qty
     info[I_REF] = ref
     info[I_EINT] = eint

@@ -227,8 +227,34 @@ def test_non_finite_state_is_caught(tmp_path):
     sim, stages = couplet.build(dict(couplet.PARAMS, h5=None))
     sim.build()
     sim.dyn.U[7, 0] = np.nan
-    with pytest.raises(SolverError, match=r"non-finite .* at node \d+ \(block \d\)"):
+    with pytest.raises(SolverError, match=r"non-finite .* at node 7 \(block \d\)"):
         sim.run(stages)
+    # node 0 is named too (the scan stopped only at a non-zero node id), not a node its NaN
+    # forces reached
+    sim, stages = couplet.build(dict(couplet.PARAMS, h5=None))
+    sim.build()
+    sim.dyn.U[0, 2] = np.nan
+    with pytest.raises(SolverError, match=r"non-finite .* at node 0 \(block 0\) after 1 "):
+        sim.run(stages)
+
+
+def test_runaway_reference_point_and_inverted_element_are_named():
+    """The run-away guard watches the reference points' translations (their tied nodes are not
+    free DOFs), and a non-finite stop names an element that has turned inside out (corotational
+    elastic elements get NaN forces there)."""
+    from dr_masonry import Force, Stage
+    from test_damping import _loaded_column
+    sim, rp = _loaded_column()
+    sim.options.damping = "viscous"
+    with pytest.raises(SolverError, match=r"run-away displacement .* at reference point 'tip' "):
+        sim.run([Stage("throw", 1, [Force(target=rp, dof="x", to=1e12)])])
+    sim, rp = _loaded_column()
+    z = sim.dyn.X[:, 2]
+    low = np.nonzero((z > 0.0) & (z < 0.08))[0]      # the first block's free nodes above its base
+    sim.dyn.U[low, 2] = -2.0 * z[low]                 # mirrored below the base: inside out
+    with pytest.raises(SolverError, match=r"non-finite .* \(element \d+ of block 0 inverted: "
+                                          r"Jacobian determinant -"):
+        sim.run([Stage("hold", 1, [Force(target=rp, dof="x", to=1.0)])])
 
 
 def test_restart_continues_a_run(tmp_path):
