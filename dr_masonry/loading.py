@@ -287,6 +287,9 @@ def cyclic_path(amplitudes, cycles=2, points_per_quarter=4, start_negative=False
     amps = np.asarray(amplitudes, dtype=np.float64).ravel()
     if amps.size == 0 or np.any(amps <= 0) or not np.all(np.isfinite(amps)):
         raise LoadingError(f"cyclic protocol: amplitudes must be positive and finite, got {amps}")
+    for name, v in (("points_per_quarter", points_per_quarter), ("cycles", cycles)):
+        if not is_count(v, 1):
+            raise LoadingError(f"cyclic protocol: {name}={v!r} must be a whole number >= 1")
     k = int(points_per_quarter)
     check_increments(4 * k * int(cycles) * amps.size, "cyclic protocol")
     sgn = -1.0 if start_negative else 1.0

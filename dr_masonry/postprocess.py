@@ -80,6 +80,8 @@ def energy_per_cycle(history, key, rows=None, force=None):
     if sel.shape != (len(history[key]),):
         raise PostprocessError(f"energy_per_cycle: rows has shape {sel.shape}, the history has "
                                f"{len(history[key])} rows")
+    if not sel.any():
+        raise PostprocessError("energy_per_cycle: rows selects no row of the history")
     u = np.asarray(history[key])[sel]
     cum = {k: np.asarray(history[k])[sel] for k in ("D_blocks", "D_joints", "W_ext")}
     f = np.asarray(history[force])[sel] if force is not None else None

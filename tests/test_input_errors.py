@@ -56,6 +56,26 @@ def test_paths_of_more_increments_than_any_run_could_relax_are_refused():
     assert S5.path(height=2.75, step=0.00025).size == 2192    # the scene's default path
 
 
+@pytest.mark.parametrize("kw, msg", [(dict(points_per_quarter=0), "points_per_quarter=0"),
+                                     (dict(points_per_quarter=2.5), "points_per_quarter=2.5"),
+                                     (dict(cycles=0), "cycles=0"),      # were an empty path
+                                     (dict(cycles=-1), "cycles=-1")])
+def test_cyclic_path_counts_are_whole_numbers(kw, msg):
+    with pytest.raises(LoadingError, match=rf"cyclic protocol: {msg} must be a whole number"):
+        cyclic_path([1.0], **kw)
+    assert cyclic_path([1.0], cycles=1.0, points_per_quarter=2).size == 8
+
+
+def test_postprocessing_and_material_queries_name_bad_arguments():
+    from dr_masonry.materials.plastic_damage import MaterialError
+    from dr_masonry.postprocess import PostprocessError, energy_per_cycle
+    h = {k: np.zeros(3) for k in ("u", "D_blocks", "D_joints", "W_ext")}
+    with pytest.raises(PostprocessError, match="rows selects no row"):   # was an IndexError
+        energy_per_cycle(h, "u", rows=np.zeros(3, bool))
+    with pytest.raises(MaterialError, match="which='shear'"):   # returned the compression energy
+        PlasticDamage.reference().fracture_energy("shear")
+
+
 def test_integer_options_take_integral_numbers_as_stages_do():
     o = SolverOptions(max_iter=2e5, max_cuts=np.int64(6), stall_iter=0.0)
     assert (o.max_iter, o.max_cuts, o.stall_iter) == (200_000, 6, 0)

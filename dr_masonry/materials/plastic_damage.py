@@ -243,6 +243,10 @@ class PlasticDamage:
                 f"crack-band softening branch would snap back; refine the mesh")
 
     def fracture_energy(self, which="tension"):
-        """Area under stress vs inelastic strain of a table times h_ref (N/m = J/m^2)."""
+        """Area under stress vs inelastic strain of the ``which`` ("tension" or "compression")
+        table times h_ref (N/m = J/m^2)."""
+        if which not in ("tension", "compression"):
+            raise MaterialError(f"PlasticDamage.fracture_energy: which={which!r} must be "
+                                f"'tension' or 'compression'")
         rows = np.asarray(self.tension if which == "tension" else self.compression, dtype=np.float64)
         return float(np.sum(0.5 * (rows[1:, 0] + rows[:-1, 0]) * np.diff(rows[:, 1])) * self.h_ref)
