@@ -242,8 +242,8 @@ def guarded(command, func, *args):
                         + getattr(e, "__notes__", [])), file=sys.stderr)
         return 143 if term else 130
     except ValueError as e:
-        if type(e) is ValueError:  # not one of the project's input errors: keep the traceback
-            raise
+        if not type(e).__module__.startswith("dr_masonry"):   # not one of the project's input
+            raise                                              # errors: keep the traceback
         # ParameterError, ResultsError, ModelError, ...: the message says what is wrong
         print(f"{command}: error: {e}", file=sys.stderr)
         return 2

@@ -110,5 +110,3 @@ def parse_overrides(params, argv=None, doc=None):
         out[key] = _coerce(key, text, params[key])
     return out
 
-
-# ---------------------------------------------------------------------- commands

@@ -131,13 +131,12 @@ def finish(sim, out, x, y, xlabel, ylabel, title, reference=None, vtk=True, cycl
 
     ``sim`` is closed first so that the HDF5 result is complete. Returns the written paths.
     """
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure   # no pyplot: the caller's back end is untouched
 
     sim.close()
     make_folder(os.path.dirname(out) or ".")
-    fig, ax = plt.subplots(figsize=(6, 4))
+    fig = Figure(figsize=(6, 4))
+    ax = fig.subplots()
     if reference is not None:
         ax.plot(reference[0], reference[1], "k--", lw=1, label=reference[2])
     ax.plot(x, y, "o-", ms=2, label="dr_masonry")
@@ -146,7 +145,6 @@ def finish(sim, out, x, y, xlabel, ylabel, title, reference=None, vtk=True, cycl
     ax.legend()
     fig.tight_layout()
     fig.savefig(out + ".png", dpi=120)
-    plt.close(fig)
     hist = sim.history
     keys = list(hist)
     np.savetxt(out + ".csv", np.column_stack([hist[k] for k in keys]), delimiter=",",

@@ -393,12 +393,11 @@ def write_csv(result):
 
 def plot_overlay(result):
     """The curves of the finished variants on one axes, labelled; returns the PNG path."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure   # no pyplot: the caller's back end is untouched
     c = result.curve
     ok = [r for r in result.rows if r["status"] == "ok"]
-    fig, ax = plt.subplots(figsize=(7, 4.5))
+    fig = Figure(figsize=(7, 4.5))
+    ax = fig.subplots()
     for r in ok:
         ax.plot(r["x"], r["y"], "o-", ms=2, lw=1.2, label=r["label"])
     ax.set(xlabel=c["xlabel"], ylabel=c["ylabel"],
@@ -408,5 +407,4 @@ def plot_overlay(result):
         ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(result.png, dpi=120)
-    plt.close(fig)
     return result.png

@@ -192,7 +192,7 @@ def test_kc_factor_sets_the_compression_penalty(module):
         module.build(fast(module, kc_factor=0.0))
 
 
-def test_contact_reaction_needs_a_joint(s7):
+def test_contact_reaction_needs_a_joint():
     sim = terraced_house.build(fast(terraced_house))[0]
     g = sim.groups
     with pytest.raises(LoadingError, match="no joint"):
