@@ -35,6 +35,8 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from .kernels import relaxation as R
+from .kernels.config import plain
+from .kernels.contact_frame import quad_shape
 from .kernels.joint_law import JS_D, JS_DP1, JS_DP2
 from .kernels.plastic_damage import MS_DC, MS_DT
 
@@ -173,12 +175,7 @@ class BlockCoarse:
                 + (w * self.lame[blocks, 1])[:, None, None] * k2
             add(gblock[blocks], gblock[blocks], blk)
         if c.slave.size:
-            N = np.empty((c.slave.size, 4))
-            r, s = c.xi[:, 0], c.xi[:, 1]
-            N[:, 0] = 0.25 * (1 - r) * (1 - s)
-            N[:, 1] = 0.25 * (1 + r) * (1 - s)
-            N[:, 2] = 0.25 * (1 + r) * (1 + s)
-            N[:, 3] = 0.25 * (1 - r) * (1 + s)
+            N = np.column_stack(plain(quad_shape)(c.xi[:, 0], c.xi[:, 1]))
             xm = np.matmul(N[:, None, :], X[c.master])[:, 0]
             gs, ds = self._group_of(c.slave, X[c.slave], gblock, nbg)
             gm, dm = self._group_of(c.master[:, 0], xm, gblock, nbg)

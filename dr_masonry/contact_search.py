@@ -31,7 +31,8 @@ from dataclasses import dataclass, fields
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .kernels.contact_frame import local_gap
+from .kernels.config import plain
+from .kernels.contact_frame import local_gap, quad_shape, quad_tangents
 from .model import BLOCK_FACES, HEX_NATURAL, ModelError
 
 #: default coplanarity / separation tolerance relative to the model size (bounding-box diagonal)
@@ -258,6 +259,14 @@ def clipped_area(subject, clip):
 
 
 # ---------------------------------------------------------------------------- projection
+def quad_points(xq, r, s):
+    """Points (n, 3) m of bilinear quads ``xq`` (n, 4, 3) m at natural coordinates ``r``, ``s``
+    (n,) (:func:`~.kernels.contact_frame.quad_shape`)."""
+    n0, n1, n2, n3 = plain(quad_shape)(r, s)
+    return (n0[:, None] * xq[:, 0] + n1[:, None] * xq[:, 1] + n2[:, None] * xq[:, 2]
+            + n3[:, None] * xq[:, 3])
+
+
 def project_bilinear(xq, p, iters=30):
     """Natural coordinates (r, s) of the closest point to ``p`` on bilinear quads ``xq``.
 
@@ -276,16 +285,12 @@ def project_bilinear(xq, p, iters=30):
     """
     r = np.zeros(p.shape[0])
     s = np.zeros(p.shape[0])
-    d0 = xq[:, 1] - xq[:, 0]
-    d3 = xq[:, 2] - xq[:, 3]
-    e0 = xq[:, 3] - xq[:, 0]
-    e1 = xq[:, 2] - xq[:, 1]
+    xqt = np.ascontiguousarray(np.moveaxis(xq, 0, -1))   # (4, 3, n), for quad_tangents
     for _ in range(iters):
-        x = 0.25 * ((1 - r) * (1 - s) * xq[:, 0].T + (1 + r) * (1 - s) * xq[:, 1].T
-                    + (1 + r) * (1 + s) * xq[:, 2].T + (1 - r) * (1 + s) * xq[:, 3].T).T
-        a1 = 0.25 * ((1 - s)[:, None] * d0 + (1 + s)[:, None] * d3)
-        a2 = 0.25 * ((1 - r)[:, None] * e0 + (1 + r)[:, None] * e1)
-        res = x - p
+        tan = plain(quad_tangents)(xqt, r, s)
+        a1 = np.column_stack(tan[:3])
+        a2 = np.column_stack(tan[3:])
+        res = quad_points(xq, r, s) - p
         g1 = np.einsum("ij,ij->i", a1, res)
         g2 = np.einsum("ij,ij->i", a2, res)
         j11 = np.einsum("ij,ij->i", a1, a1)
@@ -335,10 +340,7 @@ def _locate(model, F, fid, p, x, slack):
     quads = _canonical_quads(quads, x, F["normal"][fid])
     r, s = project_bilinear(x[quads], p)
     Rc, Sc = np.clip(R, -1.0, 1.0), np.clip(S, -1.0, 1.0)
-    Xf = F["X"][fid]
-    xc = 0.25 * ((1 - Rc) * (1 - Sc) * Xf[:, 0].T + (1 + Rc) * (1 - Sc) * Xf[:, 1].T
-                 + (1 + Rc) * (1 + Sc) * Xf[:, 2].T + (1 - Rc) * (1 + Sc) * Xf[:, 3].T).T
-    dp = p - xc
+    dp = p - quad_points(F["X"][fid], Rc, Sc)
     dp -= np.einsum("ij,ij->i", dp, F["normal"][fid])[:, None] * F["normal"][fid]
     inside = (np.abs(R) <= 1.0 + slack) & (np.abs(S) <= 1.0 + slack)
     outside = np.where(inside, 0.0, np.linalg.norm(dp, axis=1))

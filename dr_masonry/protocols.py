@@ -50,10 +50,6 @@ class Protocol:
         """Amplitudes in m ((n,) array); ``height`` (m) converts percent drifts."""
         return np.asarray(self.amplitudes, dtype=np.float64) * self._scale(height)
 
-    def monotonic_m(self, height=None):
-        """Monotonic target in m."""
-        return self.monotonic * self._scale(height)
-
     def path(self, height=None, step=0.5 * mm, quarter_increments=2, n_amplitudes=None,
              start_negative=False):
         """Cyclic displacement targets (m), one per increment.

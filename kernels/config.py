@@ -63,3 +63,9 @@ pjit = numba.njit(cache=True, fastmath=FASTMATH, error_model="numpy", parallel=T
 #: small per-point helpers: inlined in Numba IR, so callers loaded from the cache inline them too
 ijit = numba.njit(cache=True, fastmath=FASTMATH, error_model="numpy", inline="always")
 prange = numba.prange
+
+
+def plain(kernel):
+    """The Python body of compiled ``kernel``, to run it on numpy arrays (``kernel`` itself when
+    ``NUMBA_DISABLE_JIT=1`` left it a plain function)."""
+    return getattr(kernel, "py_func", kernel)

@@ -6,8 +6,8 @@ as internal force +F on the slave node and -N_a F on master node a. Residual = e
 """
 import numpy as np
 
-from .config import ijit, jit
-from .contact_frame import contact_frame, quad_tangents
+from .config import ijit, jit, plain
+from .contact_frame import contact_frame, frame_gap, quad_dshape, quad_shape, quad_tangents
 from .joint_law import JS_D, JS_DP1, JS_DP2, P_KC, P_KNN, P_KSS, joint_point
 
 CHUNK = 64  #: contact points per parallel task (scratch arrays allocated once per task)
@@ -89,14 +89,11 @@ def offset_forces(xq, r, s, d, frame, jac, t, ar, fbuf, row):
     g21 += t[2] * h21
     g22 += t[2] * h22
     # a1 = sum_a dN_a/dr x_a, a2 = sum_a dN_a/ds x_a
+    dnr, dns = quad_dshape(r, s)
     for a in range(4):
-        ca = -1.0 if a == 0 or a == 3 else 1.0   # corner r of node a
-        cb = -1.0 if a == 0 or a == 1 else 1.0   # corner s
-        dr = 0.25 * ca * (1.0 + cb * s)
-        ds = 0.25 * cb * (1.0 + ca * r)
-        fbuf[row + a, 0] += ar * (g10 * dr + g20 * ds)
-        fbuf[row + a, 1] += ar * (g11 * dr + g21 * ds)
-        fbuf[row + a, 2] += ar * (g12 * dr + g22 * ds)
+        fbuf[row + a, 0] += ar * (g10 * dnr[a] + g20 * dns[a])
+        fbuf[row + a, 1] += ar * (g11 * dnr[a] + g21 * dns[a])
+        fbuf[row + a, 2] += ar * (g12 * dnr[a] + g22 * dns[a])
 
 
 
@@ -119,18 +116,13 @@ def contact_chunk(lo, hi, X, U, slave, master, xi, area, law, lparams, gap0, s_o
         s = xi[c, 1]
         jac = contact_frame(xq, r, s, xm, frame)
         for a in range(3):
-            ga = ((xs[0] - xm[0]) * frame[a, 0] + (xs[1] - xm[1]) * frame[a, 1]
-                  + (xs[2] - xm[2]) * frame[a, 2]) - gap0[c, a]
-            gaps[c, a] = ga
+            gaps[c, a] = frame_gap(xs, xm, frame, a) - gap0[c, a]
         p = lparams[law[c]]
         joint_point(p, gaps[c, 0], gaps[c, 1], gaps[c, 2], s_old[c], s_new[c], t)
         for a in range(3):
             trac[c, a] = t[a]
         psi[c] = area[c] * joint_energy(p, gaps[c], s_new[c])
-        n0 = 0.25 * (1.0 - r) * (1.0 - s)
-        n1 = 0.25 * (1.0 + r) * (1.0 - s)
-        n2 = 0.25 * (1.0 + r) * (1.0 + s)
-        n3 = 0.25 * (1.0 - r) * (1.0 + s)
+        n0, n1, n2, n3 = quad_shape(r, s)
         for k in range(3):
             f = area[c] * (t[0] * frame[0, k] + t[1] * frame[1, k] + t[2] * frame[2, k])
             fbuf[5 * c, k] = f
@@ -155,8 +147,7 @@ def contact_rowsum(slave, master, xi, area, kbound, n_nodes, X=None, gap0=None):
     k A (1 + W) at the slave and k A w_a (1 + W) at master a, W = sum w_a.
     """
     r, s = xi[:, 0], xi[:, 1]
-    shp = 0.25 * np.column_stack([(1 - r) * (1 - s), (1 + r) * (1 - s), (1 + r) * (1 + s),
-                                  (1 - r) * (1 + s)])
+    shp = np.column_stack(plain(quad_shape)(r, s))
     ka = 2.0 * kbound * area
     w_slave = ka.copy()
     w_master = ka[:, None] * np.abs(shp)
@@ -164,8 +155,7 @@ def contact_rowsum(slave, master, xi, area, kbound, n_nodes, X=None, gap0=None):
         off = np.nonzero(np.abs(gap0).sum(axis=1) > OFFSET_TOL)[0]
         if off.size:
             ro, so = r[off], s[off]
-            dnr = 0.25 * np.column_stack([-(1 - so), 1 - so, 1 + so, -(1 + so)])
-            dns = 0.25 * np.column_stack([-(1 - ro), -(1 + ro), 1 + ro, 1 - ro])
+            dnr, dns = (np.column_stack(d) for d in plain(quad_dshape)(ro, so))
             xq = X[master[off]]
             la1 = np.linalg.norm(np.einsum("na,naj->nj", dnr, xq), axis=1)
             la2 = np.linalg.norm(np.einsum("na,naj->nj", dns, xq), axis=1)

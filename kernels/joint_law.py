@@ -29,7 +29,7 @@ for u >= 0, kc_pen u for u < 0, tau = kss d, state never changes except the stor
 """
 import numpy as np
 
-from .config import ijit, jit, pjit, prange
+from .config import ijit, jit
 
 # ---------------------------------------------------------------- parameter vector
 P_MODE = 0     # MODE_* below
@@ -202,27 +202,6 @@ def joint_point(p, u, d1, d2, s_old, s_new, t):
     s_new[JS_DISS] = s_old[JS_DISS] + y * (dam - d_old) + friction
     s_new[JS_DISSF] = s_old[JS_DISSF] + friction
     s_new[JS_D] = dam
-
-
-@pjit
-def joint_update(params, law, gaps, s_old, s_new, t):
-    """All contact points in parallel.
-
-    Parameters
-    ----------
-    params : (nlaw, NJP) float64
-        one parameter row per joint law.
-    law : (n,) int64
-        law index of each point.
-    gaps : (n, 3) float64
-        total local gaps [u, d1, d2] (m).
-    s_old, s_new : (n, NJS) float64
-        committed (read) and updated (written) histories.
-    t : (n, 3) float64
-        tractions [sigma, tau1, tau2] (Pa, written).
-    """
-    for i in prange(gaps.shape[0]):
-        joint_point(params[law[i]], gaps[i, 0], gaps[i, 1], gaps[i, 2], s_old[i], s_new[i], t[i])
 
 
 @jit

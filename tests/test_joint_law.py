@@ -11,6 +11,7 @@ from scipy.integrate import quad
 
 from dr_masonry.drivers_joint import JointResponse, drive_joint
 from dr_masonry.kernels import joint_law as jk
+from dr_masonry.kernels.forces import contact_forces
 from dr_masonry.materials.joint import JointLaw, JointLawError
 
 sys.path.insert(0, os.path.dirname(__file__))
@@ -112,18 +113,27 @@ def test_kernel_matches_naive_reference(lp):
                                rtol=0, atol=1e-12 * max(np.abs(path).max(), 1e-12))
 
 
-def test_loop_kernel_matches_point_kernel():
-    """joint_update over many points with several laws = point-by-point drive."""
+def test_contact_kernel_laws_match_point_reference():
+    """The solver's contact kernel over many points (several tasks) with several laws = the
+    point-by-point reference: each point takes its own law's row. Flat master quad in the xy
+    plane, every point at its centre (frame rows [z, x, y]): the kernel's local gaps are the
+    prescribed ones exactly."""
     laws = [REF, JointLaw.dry(0.6), JointLaw.tied(1e11, 1e10), REF.with_changes(shear_damage="paper")]
     params = np.vstack([lw.params_array() for lw in laws])
     rng = np.random.default_rng(3)
     n = 200
     law = rng.integers(0, len(laws), n)
     gaps = rng.uniform(-1, 1, (n, 3)) * [3e-4, 1e-3, 1e-3]
+    quad = np.array([[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 1.0, 0.0]])
+    X = np.vstack([quad, gaps[:, [1, 2, 0]]])   # slave nodes at [d1, d2, u]
+    slave = np.arange(4, 4 + n)
+    master = np.tile(np.arange(4), (n, 1))
     s_old = np.vstack([laws[k].initial_state() for k in law])
     s_new = np.empty_like(s_old)
-    t = np.empty((n, 3))
-    jk.joint_update(params, law, gaps, s_old, s_new, t)
+    g, t, fb, psi = np.empty((n, 3)), np.empty((n, 3)), np.empty((5 * n, 3)), np.empty(n)
+    contact_forces(X, np.zeros_like(X), slave, master, np.zeros((n, 2)), np.ones(n), law, params,
+                   np.zeros((n, 3)), s_old, s_new, g, t, fb, psi)
+    np.testing.assert_array_equal(g, gaps)
     for i in range(n):
         _, tr = nj.step(laws[law[i]], nj.virgin(laws[law[i]]), tuple(gaps[i]))
         np.testing.assert_allclose(t[i], tr, rtol=1e-12, atol=1e-6)
