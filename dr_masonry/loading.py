@@ -22,6 +22,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import units
+
 DOFS = {"x": 0, "y": 1, "z": 2, "rx": 3, "ry": 4, "rz": 5}
 
 
@@ -86,7 +88,7 @@ class NodeSet:
 @dataclass(eq=False)
 class Gravity:
     """Self-weight: body force density * g along -z on every non-fixed block (factor 1 = 1 g)."""
-    g: float = 9.81
+    g: float = units.g
     name: str = "gravity"
 
     def __post_init__(self):
