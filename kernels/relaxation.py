@@ -91,7 +91,11 @@ I_WIN_D = 16     # decrease of log(best ratio) over the last complete window (re
 I_WIN_K = 17     # complete rate windows so far (read and written)
 I_SEG = 18       # iterations of the current span run by earlier calls (set by the caller; see relax)
 I_KIND = 19      # what I_WORST counts: WHERE_NODE, WHERE_RP or WHERE_LOAD (the load factor)
-N_INFO = 20
+I_KE_PREV = 20   # kinetic damping: kinetic energy of the last iteration (read and written)
+I_FIRE_DT = 21   # FIRE: step factor, mixing factor and steps since the last stop (read and
+I_FIRE_A = 22    # written: with I_KE_PREV the state a call that continues a span carries on)
+I_FIRE_N = 23
+N_INFO = 24
 
 # kinds of place a guard names (info[I_KIND])
 WHERE_NODE = 0
@@ -450,15 +454,15 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, ring, tol, ref
     A call may continue the previous one: ``info[I_SEG]`` > 0 is the number of iterations that
     earlier calls ran since the state was last moved from outside (the increment's predictor, a
     coarse correction). The checks, the unstable-step window and the first-iteration exemption
-    then count on from there, so that with viscous damping a relaxation split into calls of a
-    multiple of ``check_every`` iterations is bit for bit the uninterrupted one (the solver
-    splits long spans to return to Python regularly: progress, Ctrl-C).
+    then count on from there, and kinetic damping's last kinetic energy and FIRE's step, mixing
+    factor and count (``info[I_KE_PREV]``, ``info[I_FIRE_*]``) carry over, so that a relaxation
+    split into calls of a multiple of ``check_every`` iterations is bit for bit the uninterrupted
+    one (the solver splits long spans to return to Python regularly: progress, Ctrl-C).
     """
     n = dyn.U.shape[0]
     nr = dyn.rpX.shape[0]
     rpres = np.zeros((nr, 6))
     lam = lam_arr[0]
-    ke_prev = 0.0
     damped = 0.0
     status = ST_MAXITER
     it = 0
@@ -471,10 +475,13 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, ring, tol, ref
     qty = 0.0
     # viscous damping: Rayleigh quotient with the previous internal force
     fprev = dyn.fint.copy()
-    # FIRE: step factor, mixing factor, steps since the last stop
-    dt = FIRE_DT_START if scheme == DAMP_FIRE else 1.0
-    a_mix = alpha
-    n_pos = 0
+    seg = int(info[I_SEG])
+    # kinetic damping: the last kinetic energy; FIRE: step factor, mixing factor, steps since
+    # the last stop (a call that continues a span carries them on)
+    ke_prev = info[I_KE_PREV] if seg > 0 else 0.0
+    dt = (info[I_FIRE_DT] if seg > 0 else FIRE_DT_START) if scheme == DAMP_FIRE else 1.0
+    a_mix = info[I_FIRE_A] if seg > 0 and scheme == DAMP_FIRE else alpha
+    n_pos = int(info[I_FIRE_N]) if seg > 0 else 0
     n_over = info[I_OVER]
     goal = info[I_GOAL]
     since = info[I_SINCE]
@@ -484,7 +491,6 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, ring, tol, ref
     win_n = info[I_WIN_N]
     win_d = info[I_WIN_D]
     win_k = info[I_WIN_K]
-    seg = int(info[I_SEG])
     last_check = seg
     if seg == 0:
         dyn.ring[:] = 0.0
@@ -698,6 +704,10 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, ring, tol, ref
     info[I_WIN_K] = win_k
     info[I_WORST] = worst
     info[I_KIND] = kind
+    info[I_KE_PREV] = ke_prev
+    info[I_FIRE_DT] = dt
+    info[I_FIRE_A] = a_mix
+    info[I_FIRE_N] = n_pos
     info[I_QTY] = qty
     info[I_REF] = ref
     info[I_EINT] = eint

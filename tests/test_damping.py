@@ -237,10 +237,14 @@ def test_stall_rule_counts_iterations_without_progress():
         assert info[R.I_RESID] == pytest.approx(1.0, rel=1e-9)
 
 
-def test_relaxation_split_into_calls_is_the_same_relaxation():
+@pytest.mark.parametrize("scheme, alpha", [(R.DAMP_VISCOUS, 1.0), (R.DAMP_FIRE, 0.1),
+                                           (R.DAMP_KINETIC, 0.0), (R.DAMP_LOCAL, 0.8)],
+                         ids=["viscous", "fire", "kinetic", "local"])
+def test_relaxation_split_into_calls_is_the_same_relaxation(scheme, alpha):
     """Calls that continue a span (``I_SEG``: the span's iterations so far) give the iterates of
     one uninterrupted call: the same iteration count, status and displacements bit for bit, with
-    the stall and budget rules on; the convergence checks fall on the span's multiples of
+    the stall and budget rules on, for every damping scheme (FIRE's step and mixing and kinetic
+    damping's peak test carry over); the convergence checks fall on the span's multiples of
     check_every also when a call's length is not one (25)."""
     def run(calls_of):
         sim, _ = _loaded_column()
@@ -248,7 +252,8 @@ def test_relaxation_split_into_calls_is_the_same_relaxation():
         done = 0
         while True:
             info[R.I_LEFT] = 100_000 - done
-            _relax(sim, R.DAMP_VISCOUS, 1.0, 1e-8, calls_of, 200, info)
+            _relax(sim, scheme, alpha, 1e-8, calls_of, 200 if scheme == R.DAMP_VISCOUS else 0,
+                   info)
             done += int(info[R.I_ITERS])
             info[R.I_SEG] += info[R.I_ITERS]
             if int(info[R.I_STATUS]) != R.ST_MAXITER:
