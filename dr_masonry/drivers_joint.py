@@ -40,9 +40,10 @@ def drive_joint(law, path, state=None):
     ----------
     law : JointLaw
     path : (n, 3) array_like, m
-        total gaps [u, d1, d2] (u > 0 opening), starting from the virgin state at gap 0.
+        total gaps [u, d1, d2] (u > 0 opening); the path starts at gap 0.
     state : (NJS,) array_like or None
-        starting history; None is ``law.initial_state()``.
+        history at the start (e.g. the last row of an earlier response's ``state``); None: the
+        virgin state ``law.initial_state()``.
 
     Returns
     -------
