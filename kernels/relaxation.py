@@ -433,7 +433,13 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, ring, tol, ref
         that oscillation, which frictional joints keep going, nor the slow motion that is left
         (BENCHMARKS.md section 27).
     tol : float
-        converged when ||r_free|| <= tol * max(reference, ref_floor).
+        converged when ||r_free|| <= tol * max(reference, ref_floor) (``ref_floor``: N, the
+        smallest reference force that counts, for an unloaded model).
+    max_iter : int
+        iterations of this call at most (ST_MAXITER when they run out).
+    check_every : int
+        the residual norm, convergence, stall and budget are checked on the span's iterations
+        that are multiples of it (and its first).
     stall_iter : int
         stop with ST_STALLED when the residual ratio has not fallen below ``STALL_DROP`` times
         its best value for this many iterations (a relaxation that hovers above ``tol``, e.g.
