@@ -38,6 +38,7 @@ from dr_masonry.cases import squat_wall
 from dr_masonry.cli import run_script
 from dr_masonry.geometry import plane_nodes
 from dr_masonry.materials.joint import KC_PEN_FACTOR
+from dr_masonry.model import quad_area_vector
 from dr_masonry.postprocess import cycle_text, energy_per_cycle
 from dr_masonry.protocols import S6
 from dr_masonry.scene import RUN_PARAMS, choice, finish, run_stages, scene_params, solver_summary
@@ -82,9 +83,7 @@ def build(params):
     L, H = wall.length, wall.height
     bricks = [b for c in wall.courses for b in c]
     quads = np.concatenate([model.block_face(b, 2)[1] for b in bricks])  # faces y = 0
-    x = model.nodes[quads]
-    sim.loaded_area = float(0.5 * np.linalg.norm(np.cross(x[:, 2] - x[:, 0], x[:, 3] - x[:, 1]),
-                                                  axis=1).sum())
+    sim.loaded_area = float(np.linalg.norm(quad_area_vector(model.nodes[quads]), axis=1).sum())
     # factor 1 = 1 N in all: the load factor is the total lateral force
     airbag = Combined([(Pressure(quads, name="pressure"), 1.0 / sim.loaded_area)], name="airbag")
     face = plane_nodes(model, 1, 0.0, blocks=bricks)  # the control node must carry pressure

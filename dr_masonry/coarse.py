@@ -38,7 +38,7 @@ from .kernels import relaxation as R
 from .kernels.config import plain
 from .kernels.contact_frame import quad_shape
 from .kernels.joint_law import JS_D, JS_DP1, JS_DP2
-from .kernels.plastic_damage import MS_DC, MS_DT
+from .kernels.plastic_damage import MP_LAM, MP_MU, MS_DC, MS_DT
 
 #: coarse DOFs of a block (affine motion u = a + B (X - c)) and of a reference point (rigid)
 NB, NR = 12, 6
@@ -107,10 +107,7 @@ class BlockCoarse:
         mesh = sim.mesh
         eb = np.asarray(m.element_block)
         self.volume = np.bincount(eb, mesh.wdet.sum(axis=1), minlength=m.n_blocks)  # (nb,) m^3
-        mats = m.materials
-        E = np.array([mt.E for mt in mats])[m.block_material]
-        nu = np.array([mt.nu for mt in mats])[m.block_material]
-        self.lame = np.column_stack([E * nu / ((1 + nu) * (1 - 2 * nu)), E / (2 * (1 + nu))])
+        self.lame = mesh.mparams[m.block_material][:, [MP_LAM, MP_MU]]   # (nb, 2) Pa: lambda, mu
         self.n_elem = np.bincount(eb, minlength=m.n_blocks)
         self.n_corrections = 0
         self.n_rejected = 0

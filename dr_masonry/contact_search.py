@@ -33,7 +33,8 @@ from scipy.spatial import cKDTree
 
 from .kernels.config import plain
 from .kernels.contact_frame import local_gap, quad_shape, quad_tangents
-from .model import BLOCK_FACES, HEX_NATURAL, ModelError
+from .model import (BLOCK_FACES, HEX_NATURAL, ModelError, block_corner_nodes, grid_index,
+                    quad_area_vector, quad_normal)
 
 #: default coplanarity / separation tolerance relative to the model size (bounding-box diagonal)
 REL_TOL = 1e-6
@@ -131,15 +132,13 @@ def _faces(model, x):
     """
     nb = model.n_blocks
     div = model.block_divisions
-    ijk = ((HEX_NATURAL + 1.0) * 0.5).astype(np.int64)[None] * div[:, None, :]  # (nb, 8, 3)
-    cnode = (model.block_node_start[:-1, None] + ijk[..., 0]
-             + (div[:, None, 0] + 1) * (ijk[..., 1] + (div[:, None, 1] + 1) * ijk[..., 2]))
+    cnode = block_corner_nodes(model.block_node_start[:-1], div)             # (nb, 8)
     nodes = cnode[:, FACE_CORNERS].reshape(6 * nb, 4)
     X = x[nodes]
     centre = X.mean(axis=1)
-    nrm = np.cross(X[:, 2] - X[:, 0], X[:, 3] - X[:, 1])
-    area = 0.5 * np.linalg.norm(nrm, axis=1)
-    nrm /= (2.0 * area)[:, None]
+    nrm = quad_area_vector(X)
+    area = np.linalg.norm(nrm, axis=1)
+    nrm /= area[:, None]
     block_centre = np.repeat(x[cnode].mean(axis=1), 6, axis=0)
     nrm *= np.where(np.einsum("ij,ij->i", nrm, centre - block_centre) < 0, -1.0, 1.0)[:, None]
     return {"nodes": nodes, "X": X, "centre": centre, "normal": nrm, "area": area,
@@ -533,9 +532,7 @@ def redetect(model, contacts, x_current, slack=SLIDE_SLACK, reach=None, rows=Non
         raise ModelError(f"redetect: reach must be positive lengths (m), got {reach}")
     F = _faces(model, x)
     # normal of the old master quad, current configuration
-    xq = x[contacts.master[moved]]
-    n_old = np.cross(xq[:, 2] - xq[:, 0], xq[:, 3] - xq[:, 1])
-    n_old /= np.linalg.norm(n_old, axis=1)[:, None]
+    n_old = quad_normal(x[contacts.master[moved]])
     row, fid = _near_faces(F, xs[moved], reach)
     u = np.einsum("ij,ij->i", xs[moved][row] - F["centre"][fid], F["normal"][fid])
     ok = ((F["block"][fid] != bs[row]) & (np.einsum("ij,ij->i", F["normal"][fid], n_old[row]) > 0.5)
@@ -598,10 +595,8 @@ def _near_faces(F, p, reach):
 def _face_of_quads(model, blocks, quads):
     """Block face (0..5) of master quads (n, 4) of ``blocks`` (n,): the face holding all 4 nodes."""
     div = model.block_divisions[blocks]
-    loc = quads - model.block_node_start[blocks][:, None]
-    ijk = np.stack([loc % (div[:, 0, None] + 1),
-                    (loc // (div[:, 0, None] + 1)) % (div[:, 1, None] + 1),
-                    loc // ((div[:, 0, None] + 1) * (div[:, 1, None] + 1))], axis=2)  # (n, 4, 3)
+    ijk = np.stack(grid_index(quads, model.block_node_start[blocks][:, None], div[:, 0, None],
+                              div[:, 1, None]), axis=2)                          # (n, 4, 3)
     f = np.full(blocks.shape[0], -1, np.int64)
     for face, (axis, side) in enumerate(BLOCK_FACES):
         level = 0 if side < 0 else div[:, axis]
@@ -629,8 +624,7 @@ def overhang(x, slave, sides):
     it still pushes on it: :mod:`dr_masonry.sliding`).
     """
     q = x[sides]                                                   # (nc, 4, 3)
-    n = np.cross(q[:, 2] - q[:, 0], q[:, 3] - q[:, 1])
-    n /= np.linalg.norm(n, axis=1)[:, None]
+    n = quad_normal(q)
     p = x[slave]
     inside = np.full(slave.shape[0], np.inf)
     for e in range(4):

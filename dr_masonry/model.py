@@ -9,7 +9,8 @@ Conventions
   ``HEX_NATURAL[a]``.
 * A block is meshed by the trilinear map of its 8 corners into ``nx * ny * nz`` hexahedra
   (``nx`` along natural xi = corner 0 -> 1, ``ny`` along eta = 0 -> 3, ``nz`` along zeta = 0 -> 4).
-  Its nodes are numbered ``i + (nx+1) * (j + (ny+1) * k)`` from the block's first node.
+  Its nodes are numbered ``i + (nx+1) * (j + (ny+1) * k)`` from the block's first node
+  (:func:`grid_node`, inverse :func:`grid_index`).
 * Blocks share no nodes: every block owns a contiguous range of nodes and of elements.
 """
 from __future__ import annotations
@@ -18,12 +19,56 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-HEX_NATURAL = np.array(
-    [[-1, -1, -1], [1, -1, -1], [1, 1, -1], [-1, 1, -1],
-     [-1, -1, 1], [1, -1, 1], [1, 1, 1], [-1, 1, 1]], dtype=np.float64)
+from .kernels.hex8 import CORNERS as HEX_NATURAL
+from .kernels.hex8 import trilinear_shape
 
 #: the six faces of a block: (natural axis 0/1/2 held fixed, side -1/+1)
 BLOCK_FACES = ((2, -1), (2, 1), (1, -1), (1, 1), (0, -1), (0, 1))
+#: corner indices (6, 4) of the faces of a hexahedron in ``BLOCK_FACES`` order, counter-clockwise
+#: seen from outside (their :func:`quad_area_vector` points out)
+HEX_FACE_CORNERS = np.array([[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4], [2, 3, 7, 6],
+                             [0, 4, 7, 3], [1, 2, 6, 5]])
+
+
+def grid_node(start, nx, ny, i, j, k):
+    """Global node id of grid point (i, j, k) of a block's structured grid: ``start + i +
+    (nx+1) * (j + (ny+1) * k)``, with ``start`` the block's first node and (nx, ny) its
+    divisions along xi and eta. Integer arguments or arrays that broadcast together."""
+    return start + i + (nx + 1) * (j + (ny + 1) * k)
+
+
+def grid_index(node, start, nx, ny):
+    """Grid point (i, j, k) of global node id ``node`` of a block: the inverse of
+    :func:`grid_node`, same arguments, three integer arrays of the broadcast shape."""
+    loc = node - start
+    return loc % (nx + 1), (loc // (nx + 1)) % (ny + 1), loc // ((nx + 1) * (ny + 1))
+
+
+def block_corner_nodes(start, divisions):
+    """Global node ids (nb, 8) int64 of the block corners in VTK hexahedron order, from the
+    blocks' first nodes ``start`` (nb,) and their divisions (nb, 3)."""
+    ijk = ((HEX_NATURAL + 1.0) * 0.5).astype(np.int64)[None] * divisions[:, None, :]  # (nb, 8, 3)
+    return grid_node(start[:, None], divisions[:, None, 0], divisions[:, None, 1],
+                     ijk[..., 0], ijk[..., 1], ijk[..., 2])
+
+
+def quad_area_vector(q):
+    """Area vector (..., 3) m^2 of quads ``q`` (..., 4, 3) m: half the cross product of the
+    diagonals 0->2 and 1->3 (exact for warped quads too), along the normal about which
+    corners 0-3 turn counter-clockwise."""
+    return 0.5 * np.cross(q[..., 2, :] - q[..., 0, :], q[..., 3, :] - q[..., 1, :])
+
+
+def quad_normal(q):
+    """Unit normal (..., 3) of quads ``q`` (..., 4, 3): :func:`quad_area_vector` normalised."""
+    av = quad_area_vector(q)
+    return av / np.linalg.norm(av, axis=-1)[..., None]
+
+
+def size_summary(n_blocks, n_elements, n_nodes, n_contacts):
+    """One-line description of a model's size (of :meth:`Model.summary` and a results file's)."""
+    return (f"{n_blocks} blocks, {n_elements} hexahedra, {n_nodes} nodes, "
+            f"{n_contacts} contact points")
 
 
 def id_array(what, ids, n, error=None):
@@ -48,10 +93,12 @@ class ModelError(ValueError):
     """Invalid model input; the message names the block, parameter and value."""
 
 
-def trilinear_shape(nat):
-    """Trilinear shape functions at natural points ``nat`` (m, 3) -> (m, 8)."""
-    nat = np.atleast_2d(nat)
-    return 0.125 * np.prod(1.0 + nat[:, None, :] * HEX_NATURAL[None, :, :], axis=2)
+def check_material(what, material, error=None):
+    """``material`` if it looks like a PlasticDamage (has ``params_array``), else ``error``
+    (default :class:`ModelError`) "<what> must be a PlasticDamage, got <material>"."""
+    if material is None or not hasattr(material, "params_array"):
+        raise (error or ModelError)(f"{what} must be a PlasticDamage, got {material!r}")
+    return material
 
 
 def trilinear_jacobian(corners, nat):
@@ -72,15 +119,10 @@ def box_corners(origin, size):
     return origin + 0.5 * (HEX_NATURAL + 1.0) * size
 
 
-#: corner indices of the six faces of a hexahedron (any orientation; normals fixed by the centroid)
-_FACE_CORNERS = np.array([[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4], [2, 3, 7, 6], [0, 4, 7, 3],
-                          [1, 2, 6, 5]])
-
-
 def _inside_block(corners, pts, tol):
     """Which points (m, 3) lie inside the convex block ``corners`` (8, 3) by more than ``tol``."""
-    q = corners[_FACE_CORNERS]                                  # (6, 4, 3)
-    n = np.cross(q[:, 2] - q[:, 0], q[:, 3] - q[:, 1])
+    q = corners[HEX_FACE_CORNERS]                               # (6, 4, 3)
+    n = quad_area_vector(q)     # normal sign fixed by the centroid below (any corner order)
     fc = q.mean(axis=1)
     n *= np.sign(np.einsum("ij,ij->i", n, fc - corners.mean(axis=0)))[:, None]
     n /= np.linalg.norm(n, axis=1)[:, None]
@@ -185,8 +227,7 @@ class Model:
                 v, (int, np.integer)) or v < 1 for v in div):
             raise ModelError(f"block {b}: divisions must be three integers >= 1, got {divisions!r}")
         div = tuple(int(v) for v in div)
-        if material is None or not hasattr(material, "params_array"):
-            raise ModelError(f"block {b}: material must be a PlasticDamage, got {material!r}")
+        check_material(f"block {b}: material", material)
         if not isinstance(fixed, (bool, np.bool_)):
             raise ModelError(f"block {b}: fixed must be True or False, got {fixed!r}")
         self._check_corners(b, c)
@@ -202,7 +243,7 @@ class Model:
         i, j, k = (a.transpose(2, 1, 0).ravel() for a in (i, j, k))
 
         def nid(a, bb, cc):
-            return n0 + a + (nx + 1) * (bb + (ny + 1) * cc)
+            return grid_node(n0, nx, ny, a, bb, cc)
 
         conn = np.column_stack([
             nid(i, j, k), nid(i + 1, j, k), nid(i + 1, j + 1, k), nid(i, j + 1, k),
@@ -346,15 +387,14 @@ class Model:
         nx, ny, nz = self._divisions[b]
         n0 = self._node_start[b]
         n = (nx + 1, ny + 1, nz + 1)
-        idx = np.arange(n[0] * n[1] * n[2]).reshape(n[2], n[1], n[0]).transpose(2, 1, 0) + n0
+        idx = grid_node(n0, nx, ny, *np.indices(n, dtype=np.int64))   # (nx+1, ny+1, nz+1)
         fixed = 0 if side < 0 else n[axis] - 1
         grid = np.take(idx, fixed, axis=axis)
         q = np.column_stack([grid[:-1, :-1].ravel(), grid[1:, :-1].ravel(),
                              grid[1:, 1:].ravel(), grid[:-1, 1:].ravel()])
         x = self.nodes
         centre = x[n0:self._node_start[b + 1]].mean(axis=0)
-        nrm = np.cross(x[q[:, 1]] - x[q[:, 0]], x[q[:, 3]] - x[q[:, 0]])
-        out = np.einsum("ij,ij->i", nrm, x[q].mean(axis=1) - centre) < 0
+        out = np.einsum("ij,ij->i", quad_area_vector(x[q]), x[q].mean(axis=1) - centre) < 0
         q[out] = q[out][:, ::-1]
         return grid, q
 
@@ -390,5 +430,4 @@ class Model:
     def summary(self):
         """One-line description of the model size."""
         nc = 0 if self.contacts is None else self.contacts.n
-        return (f"{self.n_blocks} blocks, {self.n_elements} hexahedra, {self.n_nodes} nodes, "
-                f"{nc} contact points")
+        return size_summary(self.n_blocks, self.n_elements, self.n_nodes, nc)

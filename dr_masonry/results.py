@@ -22,6 +22,7 @@ import h5py
 import numpy as np
 
 from .interrupts import uninterrupted
+from .model import size_summary
 
 #: version of the layout described in docs/file_format.md; bump on any incompatible change
 SCHEMA_VERSION = 1
@@ -690,8 +691,7 @@ class Result:
         c = self.model_arrays["contacts"]
         nc = 0 if c is None else len(c["slave"])
         nb = len(self.model_arrays["block_divisions"])
-        return (f"{nb} blocks, {self.sizes['element']} hexahedra, {self.sizes['node']} nodes, "
-                f"{nc} contact points")
+        return size_summary(nb, self.sizes["element"], self.sizes["node"], nc)
 
 
 def open_result(path):

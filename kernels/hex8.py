@@ -2,8 +2,8 @@
 
 Conventions
 -----------
-* Corner order is VTK's (``CORNERS[a]`` = natural coordinates of corner a, equal to
-  ``dr_masonry.model.HEX_NATURAL``).
+* Corner order is VTK's (``CORNERS[a]`` = natural coordinates of corner a; ``dr_masonry.model``
+  takes it from here as ``HEX_NATURAL``).
 * 2x2x2 Gauss rule, unit weights; Gauss point g sits at ``CORNERS[g] / sqrt(3)``.
 * ``dN`` (nt, 8, 8, 3) 1/m: dN_a/dX_i in the reference configuration, indexed
   [table, gauss point, node, direction]; element e reads table ``geo[e]``. Elements equal up to
@@ -23,13 +23,23 @@ from .config import ijit, jit, pjit, prange
 from .plastic_damage import (MP_E, MP_ELASTIC, MP_NU, MP_SBC0, MP_SBT0, MS_EPSP, NMS,
                              elastic_stress, gp_update, surely_elastic, trial_stress)
 
+#: natural coordinates of the 8 corners (8, 3), VTK order: 0-3 at zeta = -1 counter-clockwise
+#: seen from +zeta, 4-7 above them
 CORNERS = np.array(
     [[-1, -1, -1], [1, -1, -1], [1, 1, -1], [-1, 1, -1],
      [-1, -1, 1], [1, -1, 1], [1, 1, 1], [-1, 1, 1]], dtype=np.float64)
+
+
+def trilinear_shape(nat):
+    """Trilinear shape functions (m, 8) of the corners at natural points ``nat`` (m, 3)."""
+    nat = np.atleast_2d(nat)
+    return 0.125 * np.prod(1.0 + nat[:, None, :] * CORNERS[None, :, :], axis=2)
+
+
 #: natural coordinates of the 8 Gauss points (8, 3)
 GAUSS = CORNERS / np.sqrt(3.0)
 #: shape functions at the Gauss points (8 gauss points, 8 nodes)
-N_GAUSS = 0.125 * np.prod(1.0 + GAUSS[:, None, :] * CORNERS[None, :, :], axis=2)
+N_GAUSS = trilinear_shape(GAUSS)
 
 CHUNK = 64  #: elements per parallel task (scratch arrays allocated once per task)
 SHARE_RTOL = 1e-9  #: corner offsets equal to this fraction of the smallest element share a table

@@ -21,7 +21,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from dr_masonry.model import Model
+from dr_masonry.model import HEX_FACE_CORNERS, Model
 from dr_masonry.results import Result, model_arrays, open_result
 
 from .vtk_series import block_corner_nodes, positions
@@ -39,9 +39,6 @@ _MPL_VIEWS = {"iso": (25.0, -58.0), "front": (0.0, -90.0), "back": (0.0, 90.0),
               "side": (0.0, 0.0), "top": (90.0, -90.0)}
 #: fields whose colour range is fixed to [0, 1]
 DAMAGE_FIELDS = ("dt", "dc", "D")
-#: outward faces of a VTK hexahedron (corner indices)
-HEX_FACES = np.array([[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6],
-                      [3, 0, 4, 7]])
 #: the 12 edges of a hexahedron (corner indices)
 HEX_EDGES = np.array([[0, 1], [1, 2], [2, 3], [3, 0], [4, 5], [5, 6], [6, 7], [7, 4],
                       [0, 4], [1, 5], [2, 6], [3, 7]])
@@ -296,7 +293,7 @@ _GROUP_COLOURS = [(0.80, 0.40, 0.30), (0.55, 0.55, 0.60), (0.35, 0.55, 0.80), (0
 
 def exterior_faces(elements):
     """Element faces that belong to one hexahedron only: (element ids (m,), quads (m, 4))."""
-    quads = elements[:, HEX_FACES].reshape(-1, 4)
+    quads = elements[:, HEX_FACE_CORNERS].reshape(-1, 4)
     key = np.sort(quads, axis=1)
     _, inv, cnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
     once = cnt[inv.ravel()] == 1

@@ -17,6 +17,7 @@ import vtk
 from vtk.util.numpy_support import numpy_to_vtk
 
 from dr_masonry.loading import is_number
+from dr_masonry.model import block_corner_nodes as corner_nodes
 from dr_masonry.postprocess import PostprocessError
 from dr_masonry.results import Result, make_folder, open_result
 
@@ -89,20 +90,9 @@ def contact_grid(contacts, x, point_fields=None):
 
 
 def block_corner_nodes(arrays):
-    """Node ids (n_blocks, 8) of the block corners in VTK hexahedron order.
-
-    Uses the structured numbering of ``dr_masonry.model``: node ``i + (nx+1) * (j + (ny+1) * k)``
-    from the block's first node.
-    """
-    div = arrays["block_divisions"]
-    n0 = arrays["block_node_start"][:-1]
-    nx, ny, nz = div[:, 0], div[:, 1], div[:, 2]
-    hi = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0],
-                   [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]])
-    i = hi[None, :, 0] * nx[:, None]
-    j = hi[None, :, 1] * ny[:, None]
-    k = hi[None, :, 2] * nz[:, None]
-    return n0[:, None] + i + (nx[:, None] + 1) * (j + (ny[:, None] + 1) * k)
+    """Node ids (n_blocks, 8) of the block corners in VTK hexahedron order, from the model
+    ``arrays`` of a results file (:func:`dr_masonry.model.block_corner_nodes`)."""
+    return corner_nodes(arrays["block_node_start"][:-1], arrays["block_divisions"])
 
 
 def split_fields(fields, locations):

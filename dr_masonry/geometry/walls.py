@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..model import ModelError
+from ..model import ModelError, check_material
 
 TOL = 1.0e-7  # m, geometric tolerance for coincident joints and edges
 
@@ -152,9 +152,7 @@ def _point(name, value):
 
 
 def _material(name, material):
-    if material is None or not hasattr(material, "params_array"):
-        raise GeometryError(f"{name} must be a PlasticDamage material, got {material!r}")
-    return material
+    return check_material(name, material, GeometryError)
 
 
 def _brick(brick):
