@@ -14,9 +14,10 @@ import sys
 import numpy as np
 
 from dr_masonry import Displacement, JointLaw, Model, PlasticDamage, Simulation, Stage
+from dr_masonry.cases.joint import tension_envelope
 from dr_masonry.cli import run_script
-from dr_masonry.params import ParameterError, output_path, parse_overrides
-from dr_masonry.scene import finish, solver_options
+from dr_masonry.params import ParameterError
+from dr_masonry.scene import finish, scene_params, solver_options
 from dr_masonry.units import MPa, mm
 
 PARAMS = dict(
@@ -57,14 +58,6 @@ def build(params):
     return sim, stages
 
 
-def reference_curve(u, law=None):
-    """Closed-form joint stress (Pa) at opening ``u`` (m): elastic, then ft (1 - g_t)."""
-    law = law or JointLaw.reference()
-    u0 = law.ft / law.knn
-    g = (1 - np.exp(-law.zeta * (u - u0) / (law.u_k - u0))) / (1 - np.exp(-law.zeta))
-    return np.where(u <= u0, law.knn * u, np.where(u >= law.u_k, 0.0, law.ft * (1 - g)))
-
-
 def run(params):
     """Run the scene; returns (simulation, history)."""
     sim, stages = build(params)
@@ -73,15 +66,13 @@ def run(params):
 
 
 def main(argv=None):
-    params = parse_overrides(PARAMS, sys.argv[1:] if argv is None else argv, __doc__)
-    params["progress"] = True
-    params["h5"] = output_path(params) + ".h5"
+    params = scene_params(PARAMS, None, sys.argv[1:] if argv is None else argv, __doc__)
     sim, hist = run(params)
     u = hist["platen.uz"]
     s = hist["platen.fz"] / (L * T)
     finish(sim, params["out"], x=u / mm, y=s / MPa, xlabel="opening (mm)",
            ylabel="tensile stress (MPa)", title="S1 couplet",
-           reference=(u / mm, reference_curve(u) / MPa, "closed form"))
+           reference=(u / mm, tension_envelope(JointLaw.reference(), u) / MPa, "closed form"))
     print(f"peak stress {s.max() / MPa:.4f} MPa (ft = 0.12 MPa)")
     return hist
 

@@ -71,11 +71,17 @@ def build(params):
     return law, paths
 
 
+def tension_envelope(law, u):
+    """Closed-form joint stress (Pa) of ``law`` at monotonic opening ``u`` (array, m): knn u up
+    to the peak ft at u0 = ft / knn, then ft (1 - g_t(u)), zero from u_k on (MODEL.md section 2)."""
+    u0 = law.ft / law.knn
+    gt = np.clip((1 - np.exp(-law.zeta * (u - u0) / (law.u_k - u0))) / -np.expm1(-law.zeta), 0, 1)
+    return np.where(u <= u0, law.knn * u, law.ft * (1 - gt))
+
+
 def _envelopes(law, sigma, x):
     """Closed-form monotonic envelopes: tension at opening x, shear at slip x and stress sigma."""
-    u0 = law.ft / law.knn
-    gt = np.clip((1 - np.exp(-law.zeta * (x - u0) / (law.u_k - u0))) / -np.expm1(-law.zeta), 0, 1)
-    ten = np.where(x <= u0, law.knn * x, law.ft * (1 - gt))
+    ten = tension_envelope(law, x)
     fs, mup = law.fs(sigma), law.mu * max(-sigma, 0.0)
     d0 = fs / law.kss
     gs = np.clip((1 - np.exp(-law.xi * (x - d0) / (law.delta_k - d0))) / -np.expm1(-law.xi), 0, 1)

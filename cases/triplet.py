@@ -18,8 +18,8 @@ from dr_masonry import (Displacement, Force, JointLaw, Model, PlasticDamage, Sim
                         Stage)
 from dr_masonry.cli import run_script
 from dr_masonry.geometry import plane_nodes
-from dr_masonry.params import ParameterError, output_path, parse_overrides
-from dr_masonry.scene import finish, solver_options
+from dr_masonry.params import ParameterError, output_path
+from dr_masonry.scene import finish, scene_params, solver_options
 from dr_masonry.units import MPa, mm
 
 PARAMS = dict(
@@ -83,8 +83,7 @@ def check(params):
 
 
 def main(argv=None):
-    params = parse_overrides(PARAMS, sys.argv[1:] if argv is None else argv, __doc__)
-    params["progress"] = True
+    params = scene_params(PARAMS, None, sys.argv[1:] if argv is None else argv, __doc__)
     law = JointLaw.reference()
     check(params)
     for s in [float(v) * MPa for v in params["sigmas"]]:

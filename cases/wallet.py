@@ -16,8 +16,7 @@ import numpy as np
 from dr_masonry import Displacement, JointLaw, Model, PlasticDamage, Simulation, Stage
 from dr_masonry.cli import run_script
 from dr_masonry.geometry import BrickSpec, add_wall, plane_nodes
-from dr_masonry.params import output_path, parse_overrides
-from dr_masonry.scene import finish, solver_options
+from dr_masonry.scene import finish, scene_params, solver_options
 from dr_masonry.units import MPa, kN, mm
 
 PARAMS = dict(
@@ -61,9 +60,7 @@ def run(params):
 
 
 def main(argv=None):
-    params = parse_overrides(PARAMS, sys.argv[1:] if argv is None else argv, __doc__)
-    params["progress"] = True
-    params["h5"] = output_path(params) + ".h5"
+    params = scene_params(PARAMS, None, sys.argv[1:] if argv is None else argv, __doc__)
     sim, strain, stress = run(params)
     finish(sim, params["out"], x=strain * 1e3, y=stress / MPa, xlabel="strain (per mille)",
            ylabel="compressive stress (MPa)", title="S3 wallet",

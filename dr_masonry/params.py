@@ -50,6 +50,12 @@ def _coerce(key, text, default):
                          f"{type(default).__name__} like the default {default!r} ({e})") from None
 
 
+def with_preset(defaults, preset, on):
+    """A new dict: ``defaults`` with the values of ``preset`` (a scene's ``FAST``) on top when
+    ``on`` is true, else a copy of ``defaults``."""
+    return dict(defaults, **preset) if on else dict(defaults)
+
+
 def output_path(params, key="out"):
     """``params[key]``, the path stem of a scene's outputs (``out.h5``, ``out.png``, ...), after
     checking that it names a file: not blank, not a folder (ending in a separator)."""

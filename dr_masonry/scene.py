@@ -4,17 +4,18 @@ import os
 
 import numpy as np
 
-from .params import ParameterError, output_path, parse_overrides
+from .params import ParameterError, output_path, parse_overrides, with_preset
 from .results import make_folder
 from .solver import SolverError
 
 
 def scene_params(defaults, fast, argv, doc):
     """Parameters of a scene's ``main``: ``key=value`` overrides of ``defaults``, on top of the
-    ``fast`` preset when ``fast=true``; ``h5`` next to ``out`` and the progress bar on."""
+    ``fast`` preset when ``fast=true`` (``fast`` None: a scene without that parameter); ``h5``
+    next to ``out`` and the progress bar on."""
     params = parse_overrides(defaults, argv, doc)
-    if params["fast"]:                  # the preset first, explicit overrides on top
-        params = parse_overrides(dict(defaults, **fast), argv, doc)
+    if params.get("fast"):              # the preset first, explicit overrides on top
+        params = parse_overrides(with_preset(defaults, fast, True), argv, doc)
     params["h5"] = output_path(params) + ".h5"
     params["progress"] = True
     return params

@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .params import ParameterError, _coerce
+from .params import ParameterError, _coerce, with_preset
 from .results import ResultsError, make_folder
 
 #: keys the study sets itself in every variant's parameters
@@ -209,9 +209,7 @@ def run_variant(scene, label, overrides, out, threads=1):
         try:
             numba.set_num_threads(max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS)))
             mod = load_case(scene)
-            params = dict(mod.PARAMS)
-            if overrides.get("fast"):
-                params.update(mod.FAST)
+            params = with_preset(mod.PARAMS, getattr(mod, "FAST", None), overrides.get("fast"))
             params.update(overrides, out=out, h5=h5, progress=False)
             make_folder(os.path.dirname(out) or ".")
             sim = mod.run(params)[0]
