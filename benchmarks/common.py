@@ -1,10 +1,13 @@
-"""Shared helpers of the benchmark scripts: output folder, machine line, table and CSV writing."""
+"""Shared helpers of the benchmark scripts: output folder, machine line, timing, tables, CSV."""
 import csv
 import json
 import os
 import platform
 import subprocess
 import sys
+import time
+
+import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
@@ -102,3 +105,25 @@ def start(defaults, doc, argv, child_mode=None, child=None):
         return None
     print(f"machine: {machine()}")
     return params
+
+
+def timed(fn, args, repeats, min_time):
+    """(best, median) seconds per call of ``fn(*args)`` over ``repeats`` batches of >= ``min_time``
+    s each (after one untimed call); ``min_time`` 0: one call per batch."""
+    fn(*args)
+    n = 1
+    while True:
+        t0 = time.perf_counter()
+        for _ in range(n):
+            fn(*args)
+        dt = time.perf_counter() - t0
+        if dt >= min_time:
+            break
+        n = max(2 * n, int(n * 1.2 * min_time / max(dt, 1e-9)))
+    per = [dt / n]
+    for _ in range(repeats - 1):
+        t0 = time.perf_counter()
+        for _ in range(n):
+            fn(*args)
+        per.append((time.perf_counter() - t0) / n)
+    return min(per), float(np.median(per))

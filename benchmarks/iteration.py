@@ -20,11 +20,10 @@ repeats=15 file= scene= tag=]`` (about 1 min per setting); writes
 """
 import json
 import os
-import time
 
 import numpy as np
 
-from common import ROOT, child_row, report, start, stored_run  # noqa: I100  (script folder on sys.path)
+from common import ROOT, child_row, report, start, stored_run, timed  # noqa: I100  (script folder on sys.path)
 
 PARAMS = dict(
     threads="1,2",
@@ -37,17 +36,6 @@ PARAMS = dict(
     scene="",        # the scene of ``file`` (e.g. terraced_house)
     tag="",          # suffix of the CSV name
 )
-
-
-def best_median(f, repeats):
-    """(best, median) wall time of ``repeats`` calls of ``f``, s."""
-    f()
-    ts = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        f()
-        ts.append(time.perf_counter() - t0)
-    return min(ts), float(np.median(ts))
 
 
 def child(params):
@@ -95,7 +83,7 @@ def child(params):
                     ("gather", pieces(lambda: gather_pair(m.fbuf.reshape((-1, 3)), m.ptr, m.rows,
                                                           c.fbuf, c.ptr, c.rows, d.fint))),
                     ("internal_forces", pieces(lambda: R.internal_forces(m, c, d)))):
-        b, med = best_median(f, params["repeats"])
+        b, med = timed(f, (), params["repeats"], 0.0)
         out[f"{name}_us_best"] = b * us
         out[f"{name}_us_median"] = med * us
     out["rest_us_best"] = out["iteration_us_best"] - out["internal_forces_us_best"]

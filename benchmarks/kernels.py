@@ -32,7 +32,7 @@ import time
 
 import numpy as np
 
-from common import ROOT, machine, report  # noqa: I100  (script folder on sys.path)
+from common import ROOT, machine, report, timed  # noqa: I100  (script folder on sys.path)
 
 PARAMS = dict(
     sizes="1.1x0.81,4.0x2.75",  # wall length x height, m (comma separated)
@@ -138,27 +138,6 @@ def gravity(sim):
 
 #: position of ``max_iter`` in the arguments of ``relax``
 RELAX_ITERS = 11
-
-
-def timed(fn, args, repeats, min_time):
-    """(best, median) seconds per call over ``repeats`` batches of >= ``min_time`` s."""
-    fn(*args)
-    n = 1
-    while True:
-        t0 = time.perf_counter()
-        for _ in range(n):
-            fn(*args)
-        dt = time.perf_counter() - t0
-        if dt >= min_time:
-            break
-        n = max(2 * n, int(n * 1.2 * min_time / max(dt, 1e-9)))
-    per = [dt / n]
-    for _ in range(repeats - 1):
-        t0 = time.perf_counter()
-        for _ in range(n):
-            fn(*args)
-        per.append((time.perf_counter() - t0) / n)
-    return min(per), float(np.median(per))
 
 
 def steady(params):

@@ -55,7 +55,7 @@ import time
 
 import numpy as np
 
-from common import OUT, divisions, machine, report  # noqa: I100  (script folder on sys.path)
+from common import OUT, divisions, machine, report, timed  # noqa: I100  (script folder on sys.path)
 from benchmarks import kernels as bench  # noqa: I100  (common puts the repository root on sys.path)
 
 PARAMS = dict(
@@ -168,7 +168,7 @@ def timed_cpu(fn, args, params):
         fn(*a)
 
     w0, c0 = time.perf_counter(), time.process_time()
-    best, med = bench.timed(counted, args, params["repeats"], params["min_time"])
+    best, med = timed(counted, args, params["repeats"], params["min_time"])
     cpu, wall = time.process_time() - c0, time.perf_counter() - w0
     return best, med, cpu / calls[0], cpu / wall
 
