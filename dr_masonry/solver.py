@@ -27,7 +27,7 @@ from .kernels.hex8 import (corot_tables, hex_geometry_shared, inverted_element, 
 from .kernels.joint_law import JS_D, JS_DISS, JS_DISSF
 from .kernels.plastic_damage import MP_ELASTIC, MP_HMAX, MS_DC, MS_DISS, MS_DT
 from .materials import JointLaw, PlasticDamage
-from .model import ModelError, id_array
+from .model import ModelError, id_array, quad_area_vector
 from .precompile import ensure_compiled
 from .results import (ResultWriter, check_stored, ends_run, make_folder, open_result,
                       require_kept, state_fields)
@@ -579,7 +579,7 @@ class Simulation:
                 raise L.LoadingError(f"Pressure {pat.name!r}: node id {q.max()} in quads, the "
                                      f"model has {n} nodes")
             x = m.nodes[q]
-            av = 0.5 * np.cross(x[:, 2] - x[:, 0], x[:, 3] - x[:, 1])  # area vector, outward
+            av = quad_area_vector(x)   # outward (corners counter-clockwise seen from outside)
             flat = np.flatnonzero(np.linalg.norm(av, axis=1) == 0.0)
             if flat.size:
                 raise L.LoadingError(f"Pressure {pat.name!r}: quad {flat[0]} {q[flat[0]].tolist()} "
