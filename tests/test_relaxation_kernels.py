@@ -136,6 +136,21 @@ def test_every_damping_scheme_solves_the_linear_column(damping):
     assert np.all(hist["iterations"] > 10)
 
 
+def _compiled_like(ref, scheme, alpha, n_iter):
+    """``n_iter`` iterations of the compiled loop with ``scheme`` on a fresh loaded column, checked
+    against the numpy-iterated ``ref`` (node and rigid-point displacements to 1e-9 of their
+    scale); returns (simulation, info, displacement scale)."""
+    sim, _ = _loaded_column()
+    info = np.zeros(R.N_INFO)
+    _relax(sim, scheme, alpha, 1e-300, n_iter, 0, info, check_every=10 ** 9)
+    assert info[R.I_ITERS] == n_iter and info[R.I_STATUS] == R.ST_MAXITER
+    scale = np.abs(ref.dyn.U).max()
+    assert scale > 1e-7
+    assert np.allclose(sim.dyn.U, ref.dyn.U, rtol=0, atol=1e-9 * scale)
+    assert np.allclose(sim.dyn.rpU, ref.dyn.rpU, rtol=0, atol=1e-9 * np.abs(ref.dyn.rpU).max())
+    return sim, info, scale
+
+
 def test_kinetic_damping_iteration_matches_numpy_reference():
     """300 iterations of the compiled kinetic-damping loop equal the numpy iteration step by
     step (resets, the step back to the peak, the rigid point's DOFs); the energy it reports as
@@ -144,14 +159,7 @@ def test_kinetic_damping_iteration_matches_numpy_reference():
     ref, _ = _loaded_column()
     damped, resets = kinetic_reference(ref, n_iter)
     assert resets >= 3
-    sim, _ = _loaded_column()
-    info = np.zeros(R.N_INFO)
-    _relax(sim, R.DAMP_KINETIC, 0.0, 1e-300, n_iter, 0, info, check_every=10 ** 9)
-    assert info[R.I_ITERS] == n_iter and info[R.I_STATUS] == R.ST_MAXITER
-    scale = np.abs(ref.dyn.U).max()
-    assert scale > 1e-7
-    assert np.allclose(sim.dyn.U, ref.dyn.U, rtol=0, atol=1e-9 * scale)
-    assert np.allclose(sim.dyn.rpU, ref.dyn.rpU, rtol=0, atol=1e-9 * np.abs(ref.dyn.rpU).max())
+    sim, info, _ = _compiled_like(ref, R.DAMP_KINETIC, 0.0, n_iter)
     assert np.allclose(sim.dyn.V, ref.dyn.V, rtol=0, atol=1e-9 * np.abs(ref.dyn.V).max())
     assert info[R.I_DAMPED] == pytest.approx(damped, rel=1e-9)
 
@@ -167,14 +175,7 @@ def test_local_damping_iteration_matches_numpy_reference():
     ref, _ = _loaded_column()
     damped, reversals = local_reference(ref, n_iter, 0.8)
     assert damped > 0.0 and reversals > 0
-    sim, _ = _loaded_column()
-    info = np.zeros(R.N_INFO)
-    _relax(sim, R.DAMP_LOCAL, 0.8, 1e-300, n_iter, 0, info, check_every=10 ** 9)
-    assert info[R.I_ITERS] == n_iter and info[R.I_STATUS] == R.ST_MAXITER
-    scale = np.abs(ref.dyn.U).max()
-    assert scale > 1e-7
-    assert np.allclose(sim.dyn.U, ref.dyn.U, rtol=0, atol=1e-9 * scale)
-    assert np.allclose(sim.dyn.rpU, ref.dyn.rpU, rtol=0, atol=1e-9 * np.abs(ref.dyn.rpU).max())
+    sim, info, scale = _compiled_like(ref, R.DAMP_LOCAL, 0.8, n_iter)
     assert info[R.I_DAMPED] == pytest.approx(damped, rel=1e-9)
     plain, _ = _loaded_column()
     local_reference(plain, n_iter, 0.0)
