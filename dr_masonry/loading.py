@@ -202,6 +202,7 @@ class _Control:
 
     @property
     def label(self):
+        """The control's name for messages: ``name``, else its class name."""
         return self.name or type(self).__name__
 
 

@@ -346,6 +346,7 @@ class ResultWriter:
         self._f.flush()
 
     def close(self):
+        """Close the file (everything written is flushed); closing twice does nothing."""
         if self._f.id.valid:
             self._f.close()
 
@@ -552,6 +553,7 @@ class Result:
 
     @property
     def n_frames(self):
+        """Number of frames (saved states) in the file."""
         return len(self.frame_ids)
 
     @property
@@ -562,6 +564,7 @@ class Result:
 
     @property
     def n_history(self):
+        """Number of history rows (0 for a file without history)."""
         return len(next(iter(self.history.values()))) if self.history else 0
 
     @property
