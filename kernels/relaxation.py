@@ -677,8 +677,11 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, ring, tol, ref
                 for k in range(3):
                     if dyn.free[i, k] > 0.0:
                         dyn.U[i, k] += dt * dyn.V[i, k]
-            umax = worst_place(dyn, lam)[0]
-            n_bad = 0 if np.isfinite(umax) else 1
+                        a = abs(dyn.U[i, k])
+                        if not np.isfinite(a):
+                            n_bad += 1
+                        elif a > umax:
+                            umax = a
         for p in range(nr):
             for k in range(6):
                 if dyn.rpfree[p, k] > 0.0:
