@@ -687,7 +687,6 @@ class Simulation:
                                  f"{stages!r}")
         if not self._built:
             self.build()
-        ensure_compiled(self.mesh, self.cont, self.dyn)
         for stage in stages:  # register every prescribed node set so history columns stay fixed
             self._check_controls(stage)
             for ctl in stage.controls:
@@ -704,6 +703,7 @@ class Simulation:
         self._bar = tqdm(total=total, disable=not self.options.progress, unit="incr") if tqdm else None
         try:
             with terminate_as_interrupt():   # SIGTERM stops the run as Ctrl-C does
+                ensure_compiled(self.mesh, self.cont, self.dyn)
                 for k, stage in enumerate(stages[k0:], start=k0):
                     self._run_stage(stage, (k, len(stages)),
                                     *((i0, starts) if k == k0 else (0, None)))

@@ -9,6 +9,8 @@ import time
 import h5py
 import numpy as np
 import pytest
+from numba import njit
+from numba.core import event
 
 from dr_masonry.interrupts import Terminated, terminate_as_interrupt, uninterrupted
 from dr_masonry.results import CHECKPOINT_NEW, ResultWriter, open_result
@@ -58,6 +60,36 @@ def test_outside_the_main_thread_both_do_nothing():
     t.start()
     t.join()
     assert errors == [] and signal.getsignal(signal.SIGTERM) is signal.SIG_DFL
+
+
+class _SignalAtCompile(event.Listener):
+    """A Numba listener that sends ``sig`` to this process when a compilation starts."""
+
+    def __init__(self, sig):
+        self.sig = sig
+
+    def on_start(self, ev):
+        _signal_self(self.sig)
+
+    def on_end(self, ev):
+        pass
+
+
+@pytest.mark.parametrize("sig, raised", [(signal.SIGTERM, Terminated),
+                                         (signal.SIGINT, KeyboardInterrupt)])
+def test_a_signal_during_a_numba_compile_waits_for_its_end(sig, raised):
+    """Ctrl-C or SIGTERM while Numba compiles (a run's cold start) is raised once the function
+    is compiled: raised inside the compiler (in LLVM's object-code callback, for one) it left a
+    half-built function and a Numba traceback instead of a stop."""
+    @njit   # not cached: compiles here
+    def add_one(x):
+        return x + 1
+    with pytest.raises(raised):
+        with terminate_as_interrupt(), event.install_listener("numba:compile",
+                                                              _SignalAtCompile(sig)):
+            add_one(1)
+    assert len(add_one.overloads) == 1   # compiled completely before the signal was raised
+    assert add_one(1) == 2 and signal.getsignal(signal.SIGTERM) is signal.SIG_DFL
 
 
 class _SignalOnRead:
