@@ -238,6 +238,14 @@ class Indirect(_Control):
 #: iterations of about a millisecond, so a million is at least a day's run; more is a typo or a
 #: step far too fine, and a path of 10^9 targets would not even fit in memory
 MAX_INCREMENTS = 1_000_000
+#: largest residual tolerance taken (stage ``tol``, ``SolverOptions.tol`` and ``floor_tol``): the
+#: out-of-balance force relative to the applied ones; above it a row is no equilibrium
+MAX_TOL = 0.1
+
+
+def tol_ok(v):
+    """True if ``v`` is a residual tolerance in (0, MAX_TOL]."""
+    return is_number(v) and 0.0 < v <= MAX_TOL
 
 
 def check_increments(n, what):
@@ -271,8 +279,9 @@ class Stage:
         check_increments(self.increments, f"stage {self.name!r}")
         self.frames = int(self.frames)
         self.max_iter = None if self.max_iter is None else int(self.max_iter)
-        if self.tol is not None and not (is_number(self.tol) and self.tol > 0):
-            raise LoadingError(f"stage {self.name!r}: tol={self.tol!r} must be a finite number > 0")
+        if self.tol is not None and not tol_ok(self.tol):
+            raise LoadingError(f"stage {self.name!r}: tol={self.tol!r} must be a finite number in "
+                               f"(0, {MAX_TOL}] (a relative residual)")
         if not isinstance(self.controls, (list, tuple)) or not all(isinstance(c, _Control)
                                                                     for c in self.controls):
             raise LoadingError(f"stage {self.name!r}: controls must be a list of Displacement, "

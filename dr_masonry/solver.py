@@ -235,11 +235,11 @@ class SolverOptions:
                 raise OptionsError(f"SolverOptions.{name}={v!r}: must be an integer >= {low}")
             setattr(self, name, int(v))
         for name, ok, what in (
-                ("tol", lambda v: v > 0, "> 0"),
+                ("tol", L.tol_ok, f"in (0, {L.MAX_TOL}] (a relative residual)"),
                 ("safety", lambda v: v >= 1.0, ">= 1 for a stable step"),
                 ("energy_tol", lambda v: v > 0, "> 0"),
-                ("floor_tol", lambda v: v == 0.0 or v >= self.tol,
-                 f"0 (off) or >= tol = {self.tol}"),
+                ("floor_tol", lambda v: v == 0.0 or v >= self.tol and L.tol_ok(v),
+                 f"0 (off) or in [tol = {self.tol}, {L.MAX_TOL}]"),
                 ("ring", lambda v: 0.0 <= v < 2.0, "in [0, 2) (0: off)"),
                 ("max_dissipation", lambda v: v >= 0, ">= 0 (0: off)"),
                 ("checkpoint_s", lambda v: v >= 0, ">= 0 s"),

@@ -22,7 +22,8 @@ MAT = PlasticDamage.elastic(10e9, 0.2, 2000.0)
 
 
 @pytest.mark.parametrize("field, value, msg", [
-    ("tol", -1.0, r"tol=-1.0: must be a finite number > 0"),
+    ("tol", -1.0, r"tol=-1.0: must be a finite number in \(0, 0.1\] \(a relative residual\)"),
+    ("tol", 5.0, r"tol=5.0: must be a finite number in \(0, 0.1\]"),   # was run: no equilibrium
     ("tol", "1e-4", r"tol='1e-4'"),
     ("tol", float("nan"), r"tol=nan"),
     ("max_iter", 2.5, r"max_iter=2.5: must be an integer >= 1"),   # hung in the relaxation
@@ -34,7 +35,9 @@ MAT = PlasticDamage.elastic(10e9, 0.2, 2000.0)
     ("predictor", "no", r"predictor='no': must be True or False"),  # counted as True
     ("coarse", 1, r"coarse=1: must be True, False or 'auto'"),
     ("damping", "viscus", r"damping='viscus': valid values are"),
-    ("floor_tol", 1e-5, r"floor_tol=1e-05: must be a finite number 0 \(off\) or >= tol"),
+    ("floor_tol", 1e-5, r"floor_tol=1e-05: must be a finite number 0 \(off\) or in \[tol"),
+    ("floor_tol", 2.0, r"floor_tol=2.0: must be a finite number 0 \(off\) or in \[tol = 0.0001, "
+                       r"0.1\]"),                                    # was run: any row accepted
 ])
 def test_solver_options_name_the_field(field, value, msg):
     with pytest.raises(OptionsError, match=msg):
@@ -90,6 +93,7 @@ def test_stages_controls_and_patterns_are_checked_when_made():
         (lambda: Stage("s", 2, frames=0), r"frames=0"),              # ZeroDivisionError
         (lambda: Stage("s", 2, max_iter=0), r"max_iter=0"),          # fell back to the option
         (lambda: Stage("s", 2, tol=float("nan")), r"tol=nan"),
+        (lambda: Stage("s", 2, tol=0.5), r"stage 's': tol=0.5 must be a finite number in \(0, 0.1\]"),
         (lambda: Stage("s", 2, controls=None), r"controls must be a list"),
         (lambda: Stage("s", 2, controls=["x"]), r"controls must be a list"),
         (lambda: Displacement(to="abc", target=None), r"to='abc' must be a finite number"),
