@@ -8,7 +8,7 @@ import vtk
 from matplotlib.image import imread
 from vtk.util.numpy_support import vtk_to_numpy
 
-from dr_masonry.results import ResultWriter, open_result
+from dr_masonry.results import ResultsError, ResultWriter, open_result
 from dr_masonry.viz import plots, render
 from dr_masonry.viz.render import RenderError, exterior_faces, render_model
 from dr_masonry.viz.vtk_series import block_corner_nodes, export_vtk
@@ -80,6 +80,15 @@ def test_export_reference_configuration_and_increment_times(tmp_path):
     assert not os.path.exists(tmp_path / "out" / "contacts.pvd")
     g = read_vtu(tmp_path / "out" / "blocks_000007.vtu")
     np.testing.assert_array_equal(vtk_to_numpy(g.GetPoints().GetData()), m.nodes)
+
+
+def test_export_of_a_file_without_frames_says_so(tmp_path):
+    """A run stopped before its first frame: an error naming the file, not an empty series."""
+    p = tmp_path / "r.h5"
+    ResultWriter(p, tiny_model(), {}).close()
+    with pytest.raises(ResultsError, match=r"r.h5' has no frames to write as VTK .*0 history rows"):
+        export_vtk(p, tmp_path / "out")
+    assert not os.path.exists(tmp_path / "out")
 
 
 def test_block_corner_nodes_match_corner_coordinates():

@@ -19,7 +19,7 @@ from vtk.util.numpy_support import numpy_to_vtk
 from dr_masonry.loading import is_number
 from dr_masonry.model import block_corner_nodes as corner_nodes
 from dr_masonry.postprocess import PostprocessError
-from dr_masonry.results import Result, make_folder, open_result
+from dr_masonry.results import Result, ResultsError, make_folder, open_result
 
 
 def as_result(obj):
@@ -156,6 +156,9 @@ def export_vtk(h5_path, out_dir=None, warp=1.0):
         contacts).
     """
     r = as_result(h5_path)
+    if not r.n_frames:
+        raise ResultsError(f"results file {r.path!r} has no frames to write as VTK (the run "
+                           f"stopped before its first frame; {r.n_history} history rows)")
     if out_dir is None:
         out_dir = os.path.splitext(r.path)[0] + "_vtk"
     make_folder(out_dir)
