@@ -4,7 +4,9 @@ The schema is documented in ``docs/file_format.md``; :data:`SCHEMA_VERSION` is s
 and checked on reading. Every write is followed by a flush, so a run that is killed leaves a file
 that opens and holds every row and frame written before the kill; a Ctrl-C or SIGTERM waits
 until the write under way is complete (:func:`dr_masonry.interrupts.uninterrupted`), and a new
-checkpoint replaces the old one only once it is complete. The file is written with the
+checkpoint replaces the old one only once it is complete. A write that the disk could not hold
+is refused before it starts (:func:`free_bytes`, :data:`SPACE_RESERVE`): HDF5 cannot undo a
+write that fails midway, and the file might not open again. The file is written with the
 HDF5 1.8 format (``libver=("v108", "v108")``): the 1.10+ format marks a file "open for write" in its
 superblock and refuses to open it after a crash without ``h5clear``.
 
@@ -15,6 +17,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
+import shutil
 import time
 from importlib import metadata
 
@@ -59,6 +62,10 @@ CONTACT_ARRAYS = {
 REQUIRED = ("config", "history", "frames", "model/block_group",
             *(f"model/{name}" for name in MODEL_ARRAYS))
 
+#: free disk space (bytes) that a write must leave: HDF5's metadata, the space that replaced
+#: checkpoints leave in the file, the scene's CSV, plot and VTK written after the run
+SPACE_RESERVE = 16 * 2**20
+
 #: frame "position" of the last checkpoint (:meth:`Result.frame`)
 CHECKPOINT = "checkpoint"
 #: the next checkpoint while it is written; it replaces ``/checkpoint`` once complete
@@ -69,6 +76,23 @@ KEPT = "checkpoints"
 
 class ResultsError(ValueError):
     """A results file that cannot be written or read as asked; the message says why."""
+
+
+def free_bytes(path):
+    """Free bytes on the file system of file ``path`` (its folder's)."""
+    return shutil.disk_usage(os.path.dirname(os.path.abspath(path))).free
+
+
+def require_space(path, nbytes, what, then):
+    """Raise :class:`ResultsError` before writing ``what`` (about ``nbytes`` bytes) to file
+    ``path`` when its disk would keep less than :data:`SPACE_RESERVE` free; ``then`` says what
+    the user can do."""
+    free = free_bytes(path)
+    if free < nbytes + SPACE_RESERVE:
+        raise ResultsError(f"{path}: {free / 2**20:.1f} MiB free on its disk; writing {what} "
+                           f"({nbytes / 2**20:.1f} MiB) would leave less than the "
+                           f"{SPACE_RESERVE / 2**20:.0f} MiB kept free, so it was not started (a "
+                           f"write that fails midway can leave a file that does not open); {then}")
 
 
 def code_version():
@@ -130,13 +154,15 @@ class ResultWriter:
         if mode == "w":
             if model is None:
                 raise ResultsError("ResultWriter: mode 'w' needs a model, got None")
+            arrays = model_arrays(model)
+            self._require_space(_nbytes(arrays[0].values()), "the model")
             try:
                 self._f = h5py.File(self.path, "w", libver=LIBVER)
             except OSError as e:
                 raise ResultsError(f"cannot create results file {self.path!r}: "
                                    f"{e.strerror or e}") from None
             try:
-                self._create(model, config)
+                self._create(model, config, arrays)
             except BaseException:
                 self._f.close()
                 raise
@@ -163,7 +189,7 @@ class ResultWriter:
         self.flush()
 
     # ------------------------------------------------------------------ creation
-    def _create(self, model, config):
+    def _create(self, model, config, model_data):
         f = self._f
         f.attrs["format"] = FORMAT_NAME
         f.attrs["created"] = time.strftime("%Y-%m-%dT%H:%M:%S")
@@ -172,7 +198,7 @@ class ResultWriter:
         cfg.attrs["code_version"] = code_version()
         cfg.attrs["schema_version"] = SCHEMA_VERSION
         m = f.create_group("model")
-        arrays, names = model_arrays(model)
+        arrays, names = model_data
         for name, arr in arrays.items():
             m.create_dataset(name, data=arr)
         m.attrs["group_names"] = _json(names)
@@ -223,6 +249,8 @@ class ResultWriter:
                 raise ResultsError(f"append_history: column {k!r} value {row[k]!r} is not a number") \
                     from None
         n = h[cols[0]].shape[0]
+        if n % 1024 == 0:   # a new chunk of 1024 rows for every column
+            self._require_space(8 * 1024 * len(cols), f"history row {n + 1}")
         for k, v in values.items():
             h[k].resize((n + 1,))
             h[k][n] = v
@@ -265,6 +293,9 @@ class ResultWriter:
         if contacts is not None:
             sizes["contact"] = int(np.asarray(contacts.slave).shape[0])
         checked = {k: _check_field(k, v, sizes) for k, v in fields.items()}
+        self._require_space(_nbytes(a for a, _ in checked.values()) + (
+            0 if contacts is None else _nbytes(getattr(contacts, k) for k in CONTACT_ARRAYS
+                                               if hasattr(contacts, k))), f"frame {inc}")
         g = frames.create_group(name)
         g.attrs["increment"] = inc
         g.attrs["history_rows"] = self.n_history
@@ -298,12 +329,15 @@ class ResultWriter:
         keep a copy as ``/checkpoints/NNNNNN`` (a restart from there: :meth:`rewind`).
         """
         f = self._f
+        meta_json = _json(meta)
+        self._require_space((2 if keep else 1) * (_nbytes(arrays.values()) + len(meta_json)),
+                            f"the checkpoint of increment {increment}")
         if CHECKPOINT_NEW in f:   # left by a process killed while writing it
             del f[CHECKPOINT_NEW]
         g = f.create_group(CHECKPOINT_NEW)
         g.attrs["increment"] = int(increment)
         g.attrs["history_rows"] = self.n_history
-        g.attrs["meta"] = _json(meta)
+        g.attrs["meta"] = meta_json
         for name, arr in arrays.items():
             g.create_dataset(name, data=np.asarray(arr))
         g.attrs["complete"] = True
@@ -331,6 +365,11 @@ class ResultWriter:
         f.copy(f[f"{KEPT}/{_frame_name(increment)}"], CHECKPOINT_NEW)
         self._install_new()
         self.flush()
+
+    def _require_space(self, nbytes, what):
+        require_space(self.path, nbytes, what,
+                      "the file holds every row and frame written before it: free disk space, "
+                      "then resume=true continues it")
 
     def _install_new(self):
         """Replace ``/checkpoint`` by the complete ``/checkpoint_new`` (flushed first, so that a
@@ -386,6 +425,11 @@ def truncate_file(f, increment, rows):
             del frames[k]
     for k in _columns(h):
         h[k].resize((rows,))
+
+
+def _nbytes(arrays):
+    """Bytes of the arrays (or array-likes) of iterable ``arrays``."""
+    return sum(np.asarray(a).nbytes for a in arrays)
 
 
 def _n_rows(history_group):

@@ -250,3 +250,37 @@ def test_killed_writer_leaves_readable_file(tmp_path):
         w.append_history({"i": 3, "f": 30.0})
     assert open_result(p).n_history == 4
     json.loads(h5py.File(p, "r")["config"].attrs["json"])
+
+
+def test_writes_the_disk_could_not_hold_are_refused_before_they_start(tmp_path, monkeypatch):
+    """A disk filled by the run: HDF5 cannot undo a write that fails midway (a full disk left a
+    file that did not open, a flood of h5py errors and a segmentation fault); each write is
+    refused before it starts, naming the file, the free space and what it needed."""
+    import dr_masonry.results as results
+    p = tmp_path / "r.h5"
+    write_fake_result(p)
+    free = {"bytes": results.SPACE_RESERVE + 100}
+    monkeypatch.setattr(results, "free_bytes", lambda path: free["bytes"])
+    m = tiny_model()
+    w = ResultWriter(p, None, {}, mode="a")
+    with pytest.raises(ResultsError, match=r"r.h5: 16.0 MiB free on its disk; writing frame 9 "
+                                           r"\(0.0 MiB\) would leave less than the 16 MiB kept"):
+        w.write_frame(9, {"U": np.ones((m.n_nodes, 3)) * 1e-3})   # 576 bytes
+    with pytest.raises(ResultsError, match=r"writing the checkpoint of increment 9 .*resume=true"):
+        w.write_checkpoint(9, {"U": np.ones((m.n_nodes, 3))}, {"n": 9})
+    free["bytes"] = results.SPACE_RESERVE + 800   # enough for the frame, not for a kept copy
+    w.write_frame(9, {"U": np.ones((m.n_nodes, 3)) * 1e-3})
+    w.write_checkpoint(9, {"U": np.ones((m.n_nodes, 3))}, {"n": 9})
+    with pytest.raises(ResultsError, match=r"checkpoint of increment 10"):
+        w.write_checkpoint(10, {"U": np.ones((m.n_nodes, 3))}, {"n": 10}, keep=True)
+    w.close()
+    r = open_result(p)
+    assert r.frame_ids == [0, 2, 4, 9] and r.n_history == 5 and r.checkpoint()[0] == 9
+    with pytest.raises(ResultsError, match=r"writing the model"):
+        ResultWriter(tmp_path / "new.h5", m, {})
+    assert not (tmp_path / "new.h5").exists()
+    free["bytes"] = results.SPACE_RESERVE + 20_000   # the model, not 3 columns of 1,024 rows
+    with ResultWriter(tmp_path / "new.h5", m, {}) as w:
+        with pytest.raises(ResultsError, match=r"writing history row 1 \(0.0 MiB\)"):
+            w.append_history({"increment": 0, "disp": 0.0, "force": 0.0})
+    assert open_result(tmp_path / "new.h5").n_history == 0

@@ -19,7 +19,7 @@ from vtk.util.numpy_support import numpy_to_vtk
 from dr_masonry.loading import is_number
 from dr_masonry.model import block_corner_nodes as corner_nodes
 from dr_masonry.postprocess import PostprocessError
-from dr_masonry.results import Result, ResultsError, make_folder, open_result
+from dr_masonry.results import Result, ResultsError, make_folder, open_result, require_space
 
 
 def as_result(obj):
@@ -106,13 +106,16 @@ def split_fields(fields, locations):
 
 
 def _write_vtu(grid, path):
+    require_space(path, 1024 * grid.GetActualMemorySize(), "a VTK file",
+                  "the results file is complete: free disk space, then `dr-masonry vtk` writes "
+                  "the series from it")
     w = vtk.vtkXMLUnstructuredGridWriter()
     w.SetFileName(path)
     w.SetInputData(grid)
     w.SetDataModeToAppended()
     w.EncodeAppendedDataOff()
     if w.Write() != 1:
-        raise OSError(f"VTK could not write {path}")
+        raise ResultsError(f"VTK could not write {path}")
 
 
 def write_pvd(path, entries):
