@@ -19,6 +19,7 @@ import json
 import os
 import shutil
 import time
+import warnings
 from importlib import metadata
 
 import h5py
@@ -160,7 +161,7 @@ class ResultWriter:
                 self._f = h5py.File(self.path, "w", libver=LIBVER)
             except OSError as e:
                 raise ResultsError(f"cannot create results file {self.path!r}: "
-                                   f"{e.strerror or e}") from None
+                                   f"{_open_error(e)}") from None
             try:
                 self._create(model, config, arrays)
             except BaseException:
@@ -168,7 +169,11 @@ class ResultWriter:
                 raise
         elif mode == "a":
             check_file(self.path)
-            self._f = h5py.File(self.path, "a", libver=LIBVER)
+            try:
+                self._f = h5py.File(self.path, "a", libver=LIBVER)
+            except OSError as e:
+                raise ResultsError(f"cannot continue results file {self.path!r}: "
+                                   f"{_open_error(e)}") from None
             if (CHECKPOINT not in self._f and CHECKPOINT_NEW in self._f
                     and self._f[CHECKPOINT_NEW].attrs.get("complete", False)):
                 self._f.move(CHECKPOINT_NEW, CHECKPOINT)   # killed between removal and rename
@@ -523,6 +528,35 @@ def ends_run(position):
     return bool(position) and position[0] == position[3] - 1 and position[1] == position[4]
 
 
+def _open_error(e):
+    """What an OSError of ``h5py.File`` means for the user."""
+    if "unable to lock file" in str(e):
+        return "another process has it open (a run still writing it?)"
+    return e.strerror or str(e)
+
+
+#: files read without HDF5's lock in this process (warned once each)
+_UNLOCKED = set()
+
+
+def _reading(path):
+    """``h5py.File`` of ``path`` for reading. A file that a running process holds open for
+    writing (HDF5's lock: a run still going) is read without the lock, with a warning once: the
+    writer flushes after every row, frame and checkpoint, so its file reads as of its last write,
+    but a read during a write may miss it or fail."""
+    try:
+        return h5py.File(path, "r")
+    except OSError as e:
+        if "unable to lock file" not in str(e):
+            raise
+    if path not in _UNLOCKED:
+        _UNLOCKED.add(path)
+        warnings.warn(f"results file {path!r} is open for writing in another process (a run "
+                      f"still going?): read without HDF5's lock, as of the last row written",
+                      RuntimeWarning, stacklevel=3)
+    return h5py.File(path, "r", locking=False)
+
+
 def check_file(path):
     """Raise :class:`ResultsError` unless ``path`` is a dr_masonry results file of this schema."""
     path = os.fspath(path)
@@ -531,7 +565,7 @@ def check_file(path):
     if not os.path.isfile(path):
         raise ResultsError(f"results file {path!r} does not exist")
     try:
-        with h5py.File(path, "r") as f:
+        with _reading(path) as f:
             fmt = f.attrs.get("format")
             ver = f["config"].attrs.get("schema_version") if "config" in f else None
             missing = [name for name in REQUIRED if name not in f]
@@ -570,7 +604,7 @@ class Result:
     def __init__(self, path):
         check_file(path)
         self.path = os.fspath(path)
-        with h5py.File(self.path, "r") as f:
+        with _reading(self.path) as f:
             m = f["model"]
             self.model_arrays = {k: m[k][()] for k in m if isinstance(m[k], h5py.Dataset)}
             self.model_arrays["contacts"] = (
@@ -603,7 +637,7 @@ class Result:
     @property
     def kept_checkpoints(self):
         """Increments of the checkpoints kept for a restart further back (``/checkpoints``)."""
-        with h5py.File(self.path, "r") as f:
+        with _reading(self.path) as f:
             return _kept(f)
 
     @property
@@ -638,14 +672,14 @@ class Result:
     def complete(self):
         """Whether the stored run ended its last stage: its last checkpoint's stage position
         (:func:`ends_run`) is the last increment of the last stage."""
-        with h5py.File(self.path, "r") as f:
+        with _reading(self.path) as f:
             if CHECKPOINT not in f and CHECKPOINT_NEW not in f:
                 return False
             return ends_run(self._meta(self._checkpoint_group(f)).get("stage"))
 
     def checkpoint(self):
         """(increment, arrays dict, meta dict) of the last checkpoint; ResultsError if none."""
-        with h5py.File(self.path, "r") as f:
+        with _reading(self.path) as f:
             g = self._checkpoint_group(f)
             arrays = {}
             g.visititems(lambda k, v: arrays.__setitem__(k, v[()])
@@ -669,7 +703,7 @@ class Result:
         the checkpoint holds, ``U``, ``dt``, ``dc``, ``D``, ``slip_max``)."""
         if i == CHECKPOINT:
             return self._checkpoint_fields()
-        with h5py.File(self.path, "r") as f:
+        with _reading(self.path) as f:
             g = self._frame_group(f, i)
             fields = {k: v[()] for k, v in g.items() if isinstance(v, h5py.Dataset)}
         bad = [k for k, v in fields.items() if v.dtype.kind == "f" and not np.all(np.isfinite(v))]
@@ -680,12 +714,12 @@ class Result:
 
     def frame_increment(self, i):
         """Increment of frame ``i`` (or of the last checkpoint: ``i = "checkpoint"``)."""
-        with h5py.File(self.path, "r") as f:
+        with _reading(self.path) as f:
             g = self._checkpoint_group(f) if i == CHECKPOINT else self._frame_group(f, i)
             return int(g.attrs["increment"])
 
     def _checkpoint_fields(self):
-        with h5py.File(self.path, "r") as f:
+        with _reading(self.path) as f:
             g = self._checkpoint_group(f)
             return state_fields(g["U"][()], g["s_blocks"][()], g["s_joints"][()])
 
@@ -694,14 +728,14 @@ class Result:
         if i == CHECKPOINT:
             return {"U": "node", "dt": "element", "dc": "element", "D": "contact",
                     "slip_max": "contact"}
-        with h5py.File(self.path, "r") as f:
+        with _reading(self.path) as f:
             g = self._frame_group(f, i)
             return {k: str(v.attrs["location"]) for k, v in g.items()
                     if isinstance(v, h5py.Dataset)}
 
     def frame_attrs(self, i):
         """Attributes of frame ``i`` (``increment``, ``history_rows``, ``time``, ...)."""
-        with h5py.File(self.path, "r") as f:
+        with _reading(self.path) as f:
             return {k: (v.item() if hasattr(v, "item") else v)
                     for k, v in self._frame_group(f, i).attrs.items()}
 
@@ -709,7 +743,7 @@ class Result:
         """Contact arrays valid at frame ``i`` (the frame's own set if it has one; ``i =
         "checkpoint"``: the checkpoint's), or None."""
         if i == CHECKPOINT:
-            with h5py.File(self.path, "r") as f:
+            with _reading(self.path) as f:
                 g = self._checkpoint_group(f)
                 a = {k: v[()] for k, v in g["contacts"].items()} if "contacts" in g else {}
             base = self.model_arrays["contacts"]
@@ -717,7 +751,7 @@ class Result:
                 return base
             return dict(base, **{k: a[k] for k in CONTACT_ARRAYS if k in a})
         if i is not None:
-            with h5py.File(self.path, "r") as f:
+            with _reading(self.path) as f:
                 g = self._frame_group(f, i)
                 if "contacts" in g:
                     return {k: v[()] for k, v in g["contacts"].items()}

@@ -284,3 +284,34 @@ def test_writes_the_disk_could_not_hold_are_refused_before_they_start(tmp_path, 
         with pytest.raises(ResultsError, match=r"writing history row 1 \(0.0 MiB\)"):
             w.append_history({"increment": 0, "disp": 0.0, "force": 0.0})
     assert open_result(tmp_path / "new.h5").n_history == 0
+
+
+def test_a_file_a_running_process_writes_is_read_with_a_warning(tmp_path):
+    """`dr-masonry info` on a run still going: HDF5's lock refused the read ('unable to lock
+    file'); the file is read as of its last row, with a warning naming it."""
+    import dr_masonry.results as results
+    p = tmp_path / "r.h5"
+    write_fake_result(p)
+    holder = subprocess.Popen([sys.executable, "-c", textwrap.dedent(f"""
+        import sys
+        from dr_masonry.results import ResultWriter
+        w = ResultWriter({str(p)!r}, None, {{}}, mode="a")
+        w.append_history({{"increment": 5, "disp": 5e-4, "force": 0.0}})
+        print("open", flush=True)
+        sys.stdin.read()     # holds the file open for writing until stdin closes
+        """)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "open"
+        with pytest.raises(OSError, match="unable to lock file"):
+            h5py.File(p, "r")
+        results._UNLOCKED.discard(str(p))
+        with pytest.warns(RuntimeWarning, match=r"r.h5' is open for writing in another process"):
+            r = open_result(p)
+        assert r.n_history == 6 and r.history["disp"][-1] == 5e-4 and r.frame_ids == [0, 2, 4]
+        for mode, verb in (("a", "continue"), ("w", "create")):   # resume, or a run again
+            with pytest.raises(ResultsError, match=rf"cannot {verb} results file .*r.h5': another "
+                                                   r"process has it open \(a run still writing"):
+                ResultWriter(p, tiny_model() if mode == "w" else None, {}, mode=mode)
+    finally:
+        holder.communicate(timeout=30)
+    assert holder.returncode == 0
