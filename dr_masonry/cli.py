@@ -16,6 +16,7 @@ import json
 import os
 import pkgutil
 import sys
+import warnings
 
 import numpy as np
 
@@ -232,7 +233,11 @@ def guarded(command, func, *args):
     """``func(*args)`` as the command ``command``; returns the exit status: the function's int
     result (0 otherwise), 1 when a run stops on a :class:`~dr_masonry.solver.SolverError` and 2
     on bad input (the message, no traceback), 130 after Ctrl-C and 143 after SIGTERM (where the
-    results are, no traceback)."""
+    results are, no traceback). Warnings print as one line ``command: Category: message``
+    (Python's format adds the file, line and source line of the ``warnings.warn`` call)."""
+    def one_line(message, category, filename, lineno, line=None):
+        return f"{command}: {category.__name__}: {message}\n"
+    python_format, warnings.formatwarning = warnings.formatwarning, one_line
     try:
         rc = func(*args)
         return rc if isinstance(rc, int) else 0
@@ -255,3 +260,5 @@ def guarded(command, func, *args):
         print("\n".join([f"{command}: stopped: {e}"] + getattr(e, "__notes__", [])),
               file=sys.stderr)
         return 1
+    finally:
+        warnings.formatwarning = python_format

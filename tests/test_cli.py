@@ -221,3 +221,19 @@ def test_a_run_that_stops_gives_its_diagnosis(tmp_path, capsys):
     assert rc == 1
     assert "dr-masonry run: stopped: increment 1 of stage" in err and "did not converge" in err
     assert f"0 rows written to {out}.h5" in err and "Traceback" not in err
+
+
+def test_warnings_print_as_one_line_naming_the_command():
+    """A run's warnings (energy balance, overhang, a row accepted at the floor) print as
+    ``command: Category: message``, not with the file, line and source line of the
+    ``warnings.warn`` call; Python's format is back afterwards."""
+    code = ("import sys, warnings\n"
+            "from dr_masonry.cli import guarded\n"
+            "python_format = warnings.formatwarning\n"
+            "rc = guarded('squat_wall.py', warnings.warn, 'increment 3: energy balance 2.1 %')\n"
+            "assert warnings.formatwarning is python_format\n"
+            "sys.exit(rc)\n")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stderr == "squat_wall.py: UserWarning: increment 3: energy balance 2.1 %\n"
