@@ -1,5 +1,4 @@
 """Masonry generators: bonds by hand, tiling (volume + no overlap), openings, corners, house."""
-import time
 import warnings
 
 import numpy as np
@@ -9,6 +8,7 @@ from hypothesis import given, settings, strategies as st
 from dr_masonry.geometry import (BrickSpec, GeometryError, HouseParams, Lintel, Opening,
                                  add_beam, add_corner, add_foundation, add_slab, add_wall,
                                  plane_nodes, terraced_house)
+from dr_masonry.contact_search import detect_contacts
 from dr_masonry.model import Model, ModelError
 
 L, H, T = 0.22, 0.081, 0.102
@@ -334,12 +334,10 @@ def check_house(m, g, p):
 
 @pytest.mark.parametrize("half", [True, False])
 @pytest.mark.parametrize("coarse", [True, False])
-def test_coarse_house_builds_fast(half, coarse):
+def test_coarse_house(half, coarse):
     p = HouseParams(half=half).scaled(coarse)
     m = Model()
-    t0 = time.perf_counter()
     g = terraced_house(m, p, MAT, STEEL, STEEL)
-    assert time.perf_counter() - t0 < 1.0
     assert m.n_blocks < 250
     check_house(m, g, p)
 
@@ -350,9 +348,7 @@ def test_default_house():
     assert (lay.n_storey, lay.n_slab, lay.n_masonry) == (33, 2, 31)
     assert lay.slab_thickness == pytest.approx(0.162) and lay.symmetry_y == pytest.approx(2.65)
     m = Model()
-    t0 = time.perf_counter()
     g = terraced_house(m, p, MAT, STEEL, STEEL)
-    assert time.perf_counter() - t0 < 10.0
     check_house(m, g, p)
     assert 1500 < len(g["masonry"]) < 4000
 
@@ -373,23 +369,21 @@ def test_house_errors(kw, match):
 
 
 def test_contacts_sum_to_joint_areas():
-    cs = pytest.importorskip("dr_masonry.contact_search")
     m = Model()
     m.set_joint_law(object())
     add_wall(m, (0, 0, 0), 0.44, 3 * H, MAT)
-    contacts = cs.detect_contacts(m)
+    contacts = detect_contacts(m)
     # bed joints: 2 x (0.44 x T); head joints: course 0 one, course 1 two, course 2 one
     assert contacts.area.sum() == pytest.approx(2 * 0.44 * T + 4 * H * T, rel=1e-9)
 
 
 def test_house_contacts():
     """Slabs touch the transversal walls only; piers and transversal walls are interlocked."""
-    cs = pytest.importorskip("dr_masonry.contact_search")
     p = HouseParams().scaled()
     m = Model()
     m.set_joint_law(object())
     g = terraced_house(m, p, MAT, STEEL, STEEL)
-    c = cs.detect_contacts(m)
+    c = detect_contacts(m)
     grp = np.array(m.block_group)
     pairs = {tuple(sorted(x)) for x in zip(grp[c.blocks[:, 0]], grp[c.blocks[:, 1]])}
     slab_pairs = {q for q in pairs if any(s.startswith("slabs") for s in q)}

@@ -146,7 +146,7 @@ def test_geometry_rejects_bad_input():
     Xn[2, 1] = np.nan
     with pytest.raises(hex8.HexMeshError, match="NaN"):
         hex8.hex_geometry(Xn, conn)
-    with pytest.raises(ValueError):
+    with pytest.raises(hex8.HexMeshError, match="conn must be an integer array"):
         hex8.hex_geometry(X, conn.astype(float))
 
 
@@ -162,13 +162,12 @@ def test_forces_match_numpy_reference(seed):
     mats = [(rng.uniform(1e9, 3e10), rng.uniform(0.0, 0.45)) for _ in range(3)]
     params = np.array([elastic_params(E, nu) for E, nu in mats])
     elem_mat = rng.integers(0, 3, ne).astype(np.int64)
-    f_elem, energy, f_node = run_forces(U, X, conn, None, None, elem_mat, params)
+    f_elem, energy, _ = run_forces(U, X, conn, None, None, elem_mat, params)
     for e in range(ne):
         E, nu = mats[elem_mat[e]]
         f_ref, en_ref, _, _ = nv.element_forces(X[conn[e]], U[conn[e]], E, nu)
         assert np.abs(f_elem[e] - f_ref).max() <= 1e-12 * np.abs(f_ref).max()
         assert energy[e] == pytest.approx(en_ref, rel=1e-12)
-    assert np.array_equal(f_node, f_elem.reshape(-1, 3))
 
 
 def test_damaging_material_below_cracking_is_elastic():

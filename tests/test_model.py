@@ -64,5 +64,13 @@ def test_touching_and_wedge_blocks_are_not_overlaps():
         # corners 0-3 counter-clockwise seen from +z: here the ring lies in x-z; reorder to x-y-z
         c = c[:, [0, 2, 1]][[0, 1, 2, 3, 4, 5, 6, 7]]
         m.add_block(c, MAT)
-    detect_contacts(m)
-    assert m.contacts.n > 0
+    cs = detect_contacts(m)
+    area = {}
+    for (a, b), ar in zip(np.sort(cs.blocks, axis=1), cs.area):
+        area[(int(a), int(b))] = area.get((int(a), int(b)), 0.0) + ar
+    # the head joint of boxes 0-1 (0.1 x 0.08 m), none where box 2 only touches box 1 along an
+    # edge, and each of the 5 joints between the 6 wedges ((r1 - r0) x 0.1 m)
+    assert sorted(area) == [(0, 1), (3, 4), (4, 5), (5, 6), (6, 7), (7, 8)]
+    assert area[(0, 1)] == pytest.approx(0.1 * 0.08, rel=1e-12)
+    for pair in [(3, 4), (4, 5), (5, 6), (6, 7), (7, 8)]:
+        assert area[pair] == pytest.approx((r1 - r0) * 0.1, rel=1e-12)

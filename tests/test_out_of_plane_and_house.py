@@ -123,9 +123,9 @@ def test_s7_reduced_cyclic_protocol(tmp_path, capsys):
     by the scene's ``main``: the floor forces follow the top displacement through both reversals
     under indirect control, the base shear changes sign with the loading, the cracked house needs
     a pull to come back to zero displacement after the positive half and returns nearly unloaded
-    after the negative one (a few per cent of the peak, whose sign is a matter of rounding: it
-    differs between machines), and the closed cycle dissipates energy; the cycle table (CSV and
-    printed) holds that cycle."""
+    after the negative one (11 % of the peak on this machine, 2026-12-01; its sign is a matter
+    of rounding: it differs between machines), and the closed cycle dissipates energy; the cycle
+    table (CSV and printed) holds that cycle."""
     from dr_masonry.postprocess import energy_per_cycle
     from dr_masonry.results import open_result
     out = tmp_path / "s7_cyclic"
@@ -141,7 +141,7 @@ def test_s7_reduced_cyclic_protocol(tmp_path, capsys):
     assert np.allclose(u, [1.25, 2.5, 1.25, 0.0, -1.25, -2.5, -1.25, 0.0], atol=1e-6)
     V = hist["lambda"][rows] * 2 * 2                 # whole house: two floors, two halves
     assert V[1] > 0 and V[5] < 0 and V[3] < 0 and max(V) > 0.5 * -min(V) > 0
-    assert abs(V[7]) < 0.25 * np.abs(V).max()
+    assert abs(V[7]) < 0.15 * np.abs(V).max()
     # global equilibrium to the out-of-balance that tol leaves (its scale is the weight)
     assert np.allclose(-hist["base.fx"][push], 2 * hist["lambda"][push], rtol=5e-3,
                        atol=5e-3 * np.abs(hist["lambda"]).max())
@@ -152,6 +152,7 @@ def test_s7_reduced_cyclic_protocol(tmp_path, capsys):
     table = np.genfromtxt(f"{out}_cycles.csv", delimiter=",", names=True)
     assert table["D_joints"] == pytest.approx(cycles[0]["D_joints"], rel=1e-12)
     assert table["F_max"] == pytest.approx(hist["lambda"][push].max() * 2, rel=1e-12)  # half
+    assert table["F_min"] == pytest.approx(hist["lambda"][push].min() * 2, rel=1e-12)
     assert 0.0 < table["xi_eq"] < 0.5
     assert "cycles of the half model" in capsys.readouterr().out
 

@@ -38,6 +38,7 @@ def _ramp(*pts, n=200):
 def test_reference_parameters():
     assert REF.E == 4800 * MPa and REF.nu == 0.17 and REF.density == 1800.0
     assert REF.fracture_energy("tension") == pytest.approx(0.44e3)  # 0.5 (1.5 + 0.1) MPa * 0.01 * 55 mm
+    assert REF.fracture_energy("compression") == pytest.approx(12.705e3)  # 0.5 (6.8 + 0.9) MPa * 0.06 * 55 mm
     # MODEL.md's Gt = 0.41 N/mm, Gc = 11.22 N/mm are 0.5 f0 eps_in,u h_ref of the same tables
     assert 0.5 * 1.5 * MPa * 0.01 * REF.h_ref == pytest.approx(0.4125e3)
     assert 0.5 * 6.8 * MPa * 0.06 * REF.h_ref == pytest.approx(11.22e3)
@@ -74,11 +75,11 @@ def test_uniaxial_reproduces_table(sign, rows, emax):
     pl = ein > 1e-7
     assert pl.sum() > 300
     err = np.abs(sign * r.stress[pl] - _table(rows, ein[pl]))
-    assert err.max() < 0.01 * rows[0][0]
+    assert err.max() < 1e-4 * rows[0][0]   # measured 2.6e-6 f0 (the return mapping's tolerance)
     assert r.flags.max() == 0
     dmg = r.dt if sign > 0 else r.dc
     assert np.allclose(dmg[pl], np.minimum(np.interp(ein[pl], np.asarray(rows)[:, 1], np.asarray(rows)[:, 2]), 0.9),
-                       atol=2e-3)
+                       atol=2e-5)   # measured 2.5e-6
 
 
 def test_unloading_stiffness_and_recovery():
@@ -90,7 +91,7 @@ def test_unloading_stiffness_and_recovery():
     d_tab = np.interp(ein, [0, 0.01], [0, 0.9])
     j = i + 50
     slope = (r.stress[j] - r.stress[i + 1]) / (e[j] - e[i + 1])
-    assert slope == pytest.approx((1 - d_tab) * E0, rel=0.01)
+    assert slope == pytest.approx((1 - d_tab) * E0, rel=1e-6)   # measured 1.3e-8
     c = r.stress < -1e3  # crack closed, compression
     sl = np.diff(r.stress[c]) / np.diff(e[c])
     assert np.allclose(sl, E0, rtol=1e-6)
@@ -105,7 +106,7 @@ def test_no_tensile_recovery_after_crushing():
     t = (r.stress > 1e3) & (np.arange(e.size) > i) & (r.dt == r.dt[i])  # tension before it cracks
     assert t.sum() > 3
     sl = np.diff(r.stress[t]) / np.diff(e[t])
-    assert np.allclose(sl, (1 - dc) * E0, rtol=0.01)
+    assert np.allclose(sl, (1 - dc) * E0, rtol=1e-6)   # measured 5e-9
 
 
 def test_damage_cap():
@@ -192,9 +193,11 @@ def test_kernel_against_naive_reference():
         st = {"eps_p": s_old[k.MS_EPSP:k.MS_EPSP + 6].copy(), "kt": s_old[k.MS_KT], "kc": s_old[k.MS_KC]}
         sig_n, new, dt, dc = naive_update(REF, h, eps, st)
         scale = max(np.abs(sig_n).max(), 1e5)
-        assert np.allclose(sig, sig_n, atol=2e-3 * scale), (trial, sig, sig_n)
-        assert np.allclose(s_new[k.MS_EPSP:k.MS_EPSP + 6], new["eps_p"], atol=1e-3 * np.abs(new["eps_p"]).max() + 1e-12)
-        assert s_new[k.MS_DT] == pytest.approx(dt, abs=2e-3) and s_new[k.MS_DC] == pytest.approx(dc, abs=2e-3)
+        # measured worst over the 60 trials: stress 1.7e-5 scale, eps_p 2.5e-7, damage 1.8e-6
+        # (the two return mappings' iteration tolerances)
+        assert np.allclose(sig, sig_n, atol=2e-4 * scale), (trial, sig, sig_n)
+        assert np.allclose(s_new[k.MS_EPSP:k.MS_EPSP + 6], new["eps_p"], atol=1e-5 * np.abs(new["eps_p"]).max() + 1e-12)
+        assert s_new[k.MS_DT] == pytest.approx(dt, abs=2e-5) and s_new[k.MS_DC] == pytest.approx(dc, abs=2e-5)
         ncheck += new["kt"] > st["kt"] or new["kc"] > st["kc"]
     assert ncheck > 20  # plenty of plastic returns among the checks
 

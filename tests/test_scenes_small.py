@@ -51,11 +51,13 @@ def test_triplet_stiff_blocks_follow_joint_law(monkeypatch):
 
 
 def test_wallet_passes_peak():
-    """S3: peak within 10 % of 6.8 MPa; the run reaches three times the peak strain."""
+    """S3: peak within 2 % of the block strength 6.8 MPa (measured -0.7 % with these 50
+    increments, -0.6 % with the scene's default; the head joints make the stress a little
+    uneven); the run reaches three times the peak strain."""
     params = dict(wallet.PARAMS, shortening=0.006, increments=50, h5=None)
     sim, strain, stress = wallet.run(params)
     k = int(np.argmax(stress))
-    assert stress[k] == pytest.approx(6.8e6, rel=0.10)
+    assert stress[k] == pytest.approx(6.8e6, rel=0.02)
     assert strain[-1] > 3 * strain[k]
     assert stress[-1] < 0.9 * stress[k]
     assert np.all(np.abs(sim.history["balance_error"]) < 0.01)

@@ -55,6 +55,10 @@ def test_synchronous_study(sync_study):
         assert np.allclose(r["y"], h["beam.fx"][push] * 1e-3)
         assert r["increments"] == h["increment"].size and r["iterations"] == h["iterations"].sum()
     assert parb["peak"] >= ref["peak"]                     # doubled cohesion: not weaker
+    laws = [open_result(r["h5"]).joint_laws for r in (ref, parb)]   # the variant reached the run
+    for key, factor in (("c", 2.0), ("delta_k", 2.0), ("ft", 1.0), ("tan_phi", 1.0)):
+        assert [law["params"][key] for law in laws[1]] == [factor * law["params"][key]
+                                                          for law in laws[0]], key
     rows = _csv(res.csv)
     assert [r["label"] for r in rows] == ["variant=reference", "variant=PAR_B"]
     assert rows[1]["param.variant"] == "PAR_B" and rows[1]["param.increments"] == "4"

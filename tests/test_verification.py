@@ -189,14 +189,17 @@ def test_rocking_after_cohesive_joint_cracks():
     opening (~ u b / h) is several times u_k = 1 mm.
 
     Static upper bound of the peak (moments about the toe, tension <= ft everywhere, compression
-    only helps overturning): lambda <= (b/h) (1 + ft t b / W) = 8.15 here; measured 6.91.
+    only helps overturning): lambda <= (b/h) (1 + ft t b / W) = 8.15 here; lower bound: the
+    load of the first crack, where the heel's stress of the linear distribution over the joint
+    (b x t) reaches ft: lambda_1 = (ft + W / (b t)) (t b^2 / 6) / (W h / 2) = 2.72; measured 6.91.
     """
     b, h = 0.2, 0.4
     law = JointLaw.reference()
     hist, bal = push_block(law, b, h, _path(0.02, 1e-3, 20))
     lam, u = hist["lambda"], hist["top.ux"]
     weight = 2000.0 * 9.81 * b * 0.1 * h
-    assert b / h < lam.max() <= (b / h) * (1.0 + law.ft * 0.1 * b / weight) * 1.001
+    first_crack = (law.ft + weight / (b * 0.1)) * (0.1 * b * b / 6.0) / (weight * h / 2.0)
+    assert first_crack < lam.max() <= (b / h) * (1.0 + law.ft * 0.1 * b / weight) * 1.001
     assert hist["max_joint_damage"][-1] == pytest.approx(1.0)
     late = u >= 0.008
     np.testing.assert_allclose(lam[late], rocking_lambda(u[late], b, h), atol=0.01 * b / h)

@@ -131,6 +131,10 @@ def test_render_png(h5, tmp_path, backend, field):
     out = render_model(h5, png, field=field, warp=100.0, backend=backend, size=(400, 300))
     assert out.backend == backend and out.path == str(png)
     assert_picture(png)
+    if field is not None:   # the field's colours, not the plain model's
+        plain = render_model(h5, tmp_path / "plain.png", warp=100.0, backend=backend,
+                             size=(400, 300))
+        assert not np.array_equal(imread(png), imread(plain.path))
 
 
 def test_render_model_object_and_backend_choice(tmp_path, monkeypatch):

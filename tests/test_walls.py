@@ -14,6 +14,7 @@ from dr_masonry.loading import LoadingError
 from dr_masonry.params import ParameterError
 from dr_masonry.postprocess import PostprocessError, cycle_bounds, energy_per_cycle
 from dr_masonry.protocols import PROTOCOLS, S4, S5
+from dr_masonry.results import open_result
 from dr_masonry.viz.plots import crack_map
 from interrupt import interrupt_after
 
@@ -224,8 +225,13 @@ def test_main_writes_outputs(tmp_path):
     squat_wall.main(["fast=true", "increments=3", "drift=0.03", f"out={out}"])
     for suffix in (".h5", ".csv", ".png"):
         assert (tmp_path / ("s5" + suffix)).exists()
-    assert (tmp_path / "s5_vtk").is_dir()
-    assert math.isfinite(np.loadtxt(str(out) + ".csv", delimiter=",", skiprows=1)[-1, 0])
+    csv = np.genfromtxt(str(out) + ".csv", delimiter=",", names=True)
+    r = open_result(str(out) + ".h5")
+    for key in ("increment", "beam.ux", "beam.fx", "W_ext"):   # the CSV is the history
+        np.testing.assert_array_equal(csv[key.replace(".", "")], r.history[key])
+    vtu = sorted(p.name for p in (tmp_path / "s5_vtk").glob("blocks_*.vtu"))
+    assert vtu == [f"blocks_{i:06d}.vtu" for i in r.frame_ids]
+    assert (tmp_path / "s5_vtk" / "blocks.pvd").exists()
 
 
 def test_interrupted_run_resumes(tmp_path, monkeypatch, squat):
@@ -233,7 +239,6 @@ def test_interrupted_run_resumes(tmp_path, monkeypatch, squat):
     uninterrupted run ends, with every row once; changed parameters are refused, changed solver
     caps are not."""
     from dr_masonry.solver import Simulation
-    from dr_masonry.results import open_result
     _, whole, _ = squat
     params = dict(tiny(squat_wall), h5=str(tmp_path / "s5.h5"), frames=1)
     commit = Simulation._commit
@@ -260,7 +265,6 @@ def test_interrupted_run_resumes(tmp_path, monkeypatch, squat):
 def test_checkpoint_between_frames(tmp_path, monkeypatch):
     """With checkpoint_s = 0 the restart data follow every increment even when frames are
     sparse: an interrupted run loses no row and resumes from an increment without a frame."""
-    from dr_masonry.results import open_result
     from dr_masonry.solver import Simulation, SolverOptions
     init, commit = SolverOptions.__init__, Simulation._commit
 
