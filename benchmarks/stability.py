@@ -3,9 +3,9 @@
 From the defaults, one change at a time:
 
 * step: the mass-scaling ``safety`` (fictitious masses = safety x Gershgorin row sum / 4, stable
-  for safety >= 1) set to each of ``safeties``. ``SolverOptions`` refuses safety < 1 in
-  ``__post_init__``; this script assigns ``sim.options.safety`` after construction **on purpose**,
-  bypassing that guard, to see what the solver does beyond the stable step;
+  for safety >= 1) set to each of ``safeties``. ``SolverOptions`` refuses safety < 1 unless
+  ``allow_unstable=True``, which this script sets **on purpose**, to see what the solver does
+  beyond the stable step;
 * joints: ``knn``, ``kss`` and the compression penalty ``kc_pen`` of every joint law times each
   of ``factors`` (``JointLaw.with_changes``);
 * blocks: Young's modulus ``E`` of every block material that is not ``stays_elastic`` (the
@@ -33,6 +33,7 @@ history written (converged increments, halves of cut increments included) agains
 Run: ``python benchmarks/stability.py [key=value ...]``; writes
 ``benchmarks/out/stability<tag>.csv``.
 """
+import dataclasses
 import json
 import os
 import re
@@ -89,7 +90,7 @@ def apply_change(sim, change, value):
     from dr_masonry.params import ParameterError
     m = sim.model
     if change == "safety":
-        sim.options.safety = value  # bypasses SolverOptions' safety >= 1 check on purpose
+        sim.options = dataclasses.replace(sim.options, safety=value, allow_unstable=True)
     elif change == "joints":
         m.joint_laws[:] = [law.with_changes(knn=value * law.knn, kss=value * law.kss,
                                             kc_pen=value * law.kc_pen) for law in m.joint_laws]

@@ -157,6 +157,9 @@ class Combined:
     name: str = "combined"
 
     def __post_init__(self):
+        if not isinstance(self.parts, (list, tuple)) or not self.parts:
+            raise LoadingError(f"Combined {self.name!r}: parts must be a non-empty list of "
+                               f"(pattern, weight) pairs, got {self.parts!r}")
         for part in self.parts:
             if not (isinstance(part, (tuple, list)) and len(part) == 2
                     and isinstance(part[0], PATTERNS) and is_number(part[1])):
@@ -288,6 +291,30 @@ class Stage:
                                f"Force, Load and Indirect controls, got {self.controls!r}")
         if sum(isinstance(c, Indirect) for c in self.controls) > 1:
             raise LoadingError(f"stage {self.name!r}: at most one Indirect control per stage")
+
+
+def check_stage(stage):
+    """Check ``stage``, its controls and their load patterns again (:class:`LoadingError`): their
+    fields can be changed after they were made (``stage.frames = 0``, ``control.to = nan``,
+    ``Gravity.g = nan``), which the checks at their creation did not see."""
+    stage.__post_init__()
+    seen = set()
+
+    def check_pattern(pat):
+        if id(pat) in seen:
+            raise LoadingError(f"stage {stage.name!r}: load pattern {pat.name!r} contains "
+                               f"itself")
+        seen.add(id(pat))
+        if hasattr(pat, "__post_init__"):
+            pat.__post_init__()
+        for part, _ in getattr(pat, "parts", ()):
+            check_pattern(part)
+        seen.discard(id(pat))
+
+    for ctl in stage.controls:
+        ctl.__post_init__()
+        if getattr(ctl, "pattern", None) is not None:
+            check_pattern(ctl.pattern)
 
 
 def cyclic_path(amplitudes, cycles=2, points_per_quarter=4, start_negative=False):

@@ -29,7 +29,7 @@ from .kernels.plastic_damage import MP_ELASTIC, MP_HMAX, MS_DC, MS_DISS, MS_DT
 from .materials import JointLaw, PlasticDamage
 from .model import ModelError, id_array, quad_area_vector
 from .precompile import ensure_compiled
-from .results import (ResultWriter, check_stored, ends_run, make_folder, open_result,
+from .results import (ResultsError, ResultWriter, check_stored, ends_run, make_folder, open_result,
                       require_kept, state_fields)
 
 #: energies of an increment at its current state (:meth:`Simulation._energies`)
@@ -139,6 +139,8 @@ class SolverOptions:
         plateau rows converge (BENCHMARKS.md section 27); 1.9 changed the peak's branch
     tol : an increment is converged when ||out-of-balance|| <= tol * ||applied loads + reactions||
     safety : fictitious masses = safety * Gershgorin row sum / 4 (stable for safety >= 1)
+    allow_unstable : accept ``safety`` < 1, a step beyond the stable one, for the stability
+        stress test (``benchmarks/stability.py``: the guards must catch what follows)
     max_iter : iteration cap of one increment before it is cut in two
     max_cuts : how many times an increment may be halved before the run stops
     stall_iter : an increment whose residual ratio has not fallen 10 % below its best value
@@ -199,6 +201,7 @@ class SolverOptions:
     ring: float = 1.0
     tol: float = 1e-4
     safety: float = 1.1
+    allow_unstable: bool = False
     max_iter: int = 200_000
     max_cuts: int = 4
     stall_iter: int = 10_000
@@ -220,7 +223,7 @@ class SolverOptions:
                                f"{list(DAMPING)}")
         if self.alpha is None:
             self.alpha = {"viscous": 1.0, "local": 0.8, "kinetic": 0.0, "fire": 0.1}[self.damping]
-        for name in ("redetect", "predictor", "progress"):
+        for name in ("redetect", "predictor", "progress", "allow_unstable"):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise OptionsError(f"SolverOptions.{name}={getattr(self, name)!r}: must be True or "
                                    "False")
@@ -236,7 +239,8 @@ class SolverOptions:
             setattr(self, name, int(v))
         for name, ok, what in (
                 ("tol", L.tol_ok, f"in (0, {L.MAX_TOL}] (a relative residual)"),
-                ("safety", lambda v: v >= 1.0, ">= 1 for a stable step"),
+                ("safety", lambda v: v >= 1.0 or self.allow_unstable and v > 0.0,
+                 ">= 1 for a stable step (> 0 with allow_unstable)"),
                 ("energy_tol", lambda v: v > 0, "> 0"),
                 ("floor_tol", lambda v: v == 0.0 or v >= self.tol and L.tol_ok(v),
                  f"0 (off) or in [tol = {self.tol}, {L.MAX_TOL}]"),
@@ -294,6 +298,8 @@ class Simulation:
         fixed_blocks = np.nonzero(model.block_fixed)[0]
         self._fixed[model.block_nodes(fixed_blocks)] = True
         self._built = False
+        self.writer = None   # the results file's writer, opened by build
+        self._closed = False   # close() was called: no more rows can be written
         self.coarse = None
         self._resuming = False
         self._checkpoint_stage = None
@@ -316,6 +322,7 @@ class Simulation:
     # ------------------------------------------------------------------ set-up API
     def node_set(self, name, nodes):
         """Register a named node set (int array of node ids)."""
+        self._before_run(f"node set {name!r}")
         self._check_name(name)
         nodes = self._nodes(f"node set {name!r}", nodes)
         ns = L.NodeSet(name, nodes)
@@ -330,6 +337,7 @@ class Simulation:
         Splits the reaction of one support (a foundation under several walls) by wall, exactly:
         the joint forces are summed per contact, whatever the meshes of the two sides.
         """
+        self._before_run(f"contact reaction {name!r}")
         self._check_name(name)
         pair = (np.asarray(blocks, dtype=np.int64), np.asarray(support, dtype=np.int64))
         on_slave, on_master = _reaction_rows(self.model.contacts.blocks, *pair)
@@ -337,6 +345,12 @@ class Simulation:
             raise L.LoadingError(f"contact reaction {name!r}: no joint between the two block sets")
         self.contact_reactions[name] = (on_slave, on_master)
         self._reaction_blocks[name] = pair
+
+    def _before_run(self, what):
+        """LoadingError: ``what`` changes the arrays that the first run built."""
+        if self._built:
+            raise L.LoadingError(f"{what} must be set before the first run (its arrays are built "
+                                 f"then)")
 
     def _check_name(self, name):
         if name in self.contact_reactions:
@@ -347,6 +361,7 @@ class Simulation:
 
     def fix(self, nodes, dofs="xyz"):
         """Clamp DOFs (any of 'x', 'y', 'z') of the given nodes (supports, symmetry planes)."""
+        self._before_run("fix")
         nodes = self._nodes("fix", nodes)
         if not (isinstance(dofs, str) and dofs):
             raise L.LoadingError(f"fix: dofs={dofs!r} must be a string of 'x', 'y', 'z'")
@@ -366,8 +381,7 @@ class Simulation:
 
         ``position`` defaults to the centroid of the nodes. Returns the :class:`RigidPoint`.
         """
-        if self._built:
-            raise L.LoadingError("rigid points must be created before the first run")
+        self._before_run(f"rigid point {name!r}")
         self._check_name(name)
         if (nodes is None) == (blocks is None):
             raise L.LoadingError(f"rigid point {name!r}: give blocks or nodes (one of them)")
@@ -452,6 +466,9 @@ class Simulation:
             bad = int(np.nonzero(free_nodes & (rowsum <= 0))[0][0])
             raise SolverError(f"node {bad} (block {m.node_block[bad]}) has no stiffness: it belongs to "
                               f"no active element and no contact")
+        if self._fixed.all():
+            raise ModelError("Simulation: every node is fixed (every block is fixed=True or "
+                             "fixed by Simulation.fix): nothing can move")
         free = (~self._fixed).astype(np.float64)
         nr = len(self.rigid_points)
         rpX = np.zeros((nr, 3))
@@ -587,6 +604,7 @@ class Simulation:
             for a in range(4):
                 np.add.at(P, q[:, a], -0.25 * av)
         elif isinstance(pat, L.PointLoad):
+            self._own(pat.target, f"PointLoad {pat.name!r}")
             k = L.dof_index(pat.dof, rotations=isinstance(pat.target, L.RigidPoint))
             if isinstance(pat.target, L.RigidPoint):
                 rpP[pat.target.index, k] = pat.value
@@ -616,6 +634,23 @@ class Simulation:
         silently win."""
         seen = {}
         for ctl in stage.controls:
+            if hasattr(ctl, "target"):
+                self._own(ctl.target, f"control {ctl.label}")
+            moves = np.any(ctl.path) if ctl.path is not None else bool(ctl.to)
+            if isinstance(ctl, L.Displacement) and isinstance(ctl.target, L.NodeSet) and moves:
+                k = L.dof_index(ctl.dof, rotations=False)
+                held = ctl.target.nodes[self._fixed[ctl.target.nodes, k]]
+                if held.size:   # (a zero displacement there records the support's reaction)
+                    raise L.LoadingError(f"control {ctl.label}: node {held[0]} (block "
+                                         f"{self.model.node_block[held[0]]}) is fixed in "
+                                         f"{ctl.dof} (a fixed block or Simulation.fix): a "
+                                         f"non-zero prescribed displacement would move a support")
+            if isinstance(ctl, L.Load):
+                P, rpP = self._pattern(ctl.pattern)
+                if not (np.any(P[~self._fixed]) or np.any(rpP)):
+                    raise L.LoadingError(f"control {ctl.label}: pattern {ctl.pattern.name!r} "
+                                         f"puts no force on any free DOF (its blocks, faces or "
+                                         f"nodes are fixed, or it is empty)")
             acts = [self._key(ctl)[1:]]    # (target, dof) or (pattern,)
             if isinstance(ctl, L.Indirect):
                 acts.append((ctl.pattern.name,))
@@ -626,6 +661,20 @@ class Simulation:
                     raise L.LoadingError(f"stage {stage.name!r}: controls {seen[what].label} and "
                                          f"{ctl.label} both act on {on}")
                 seen[what] = ctl
+
+    def _own(self, target, what):
+        """LoadingError naming ``what`` unless ``target`` is one of this simulation's rigid
+        points or node sets (one of another simulation would act on the point of that index)."""
+        if isinstance(target, L.RigidPoint):
+            ok = 0 <= target.index < len(self.rigid_points) and \
+                self.rigid_points[target.index] is target
+        else:
+            ok = self.node_sets.get(target.name) is target
+        if not ok:
+            kind = "rigid point" if isinstance(target, L.RigidPoint) else "node set"
+            raise L.LoadingError(f"{what}: {kind} {target.name!r} is not one of this "
+                                 f"simulation's (made by another Simulation's rigid_point or "
+                                 f"node_set, or by hand)")
 
     def _apply(self, ctl, value):
         """Impose one control value on the arrays (before relaxing an increment)."""
@@ -685,6 +734,14 @@ class Simulation:
                 and all(isinstance(s, L.Stage) for s in stages)):
             raise L.LoadingError(f"Simulation.run: stages must be a non-empty list of Stage, got "
                                  f"{stages!r}")
+        # fields changed since the options and stages were made (sim.options.max_iter = 2.5)
+        self.options.__post_init__()
+        for stage in stages:
+            L.check_stage(stage)
+        if self._closed:
+            raise ResultsError(f"Simulation.run: the results file {self.output} was closed "
+                               f"(Simulation.close); continue a stored run with a new Simulation "
+                               f"and resume")
         if not self._built:
             self.build()
         for stage in stages:  # register every prescribed node set so history columns stay fixed
@@ -756,10 +813,11 @@ class Simulation:
         return k, done, starts
 
     def close(self):
-        """Close the result file."""
+        """Close the result file (a run after this is refused: its rows would not be written)."""
         if self.writer is not None:
             self.writer.close()
             self.writer = None
+            self._closed = True
 
     def _run_stage(self, stage, where, first=0, starts=None):
         """Run the increments ``first`` ... of ``stage``, number ``where[0]`` of the ``where[1]``

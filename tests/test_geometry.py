@@ -358,7 +358,9 @@ def test_default_house():
                                        (dict(pier_narrow=0.15), "pier_narrow"),
                                        (dict(depth=-1.0), "depth"),
                                        (dict(heads=(2.187, 0.5)), "sill"),
-                                       (dict(storey_height=0.2), "storey_height")])
+                                       (dict(storey_height=0.2), "storey_height"),
+                                       (dict(half="no"), "half must be True or False"),
+                                       (dict(length=True), "length must be a positive length")])
 def test_house_errors(kw, match):
     m = Model()
     with pytest.raises(GeometryError, match=match):

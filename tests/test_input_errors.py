@@ -177,6 +177,82 @@ def test_controls_on_one_dof_and_bad_pressure_quads_are_refused_at_run():
         sim.run([far])
 
 
+def test_fields_changed_after_creation_are_checked_at_run():
+    """Options, stages, controls and patterns are checked when made; a field changed afterwards
+    (``sim.options.max_iter = 2.5``) is checked again when the run starts: it had hung in the
+    relaxation (2.5), raised a Numba TypingError (alpha 'x'), a KeyError (damping 'viscus'), a
+    ZeroDivisionError (frames 0) or an AttributeError (a string among the controls)."""
+    def run(change_options=None, change_stage=None):
+        m, sim, base, top = _sim()
+        rp = sim.rigid_point("top", blocks=[top])
+        stage = Stage("s", 1, [Force(target=rp, dof="z", to=-10.0),
+                               Load(pattern=Gravity(), to=1.0)])
+        for k, v in (change_options or {}).items():
+            setattr(sim.options, k, v)
+        if change_stage:
+            change_stage(stage)
+        sim.run([stage])
+    for change, msg in ((dict(max_iter=2.5), r"max_iter=2.5: must be an integer"),
+                        (dict(alpha="x"), r"alpha='x'"),
+                        (dict(damping="viscus"), r"damping='viscus': valid values"),
+                        (dict(tol=-1.0), r"tol=-1.0")):
+        with pytest.raises(OptionsError, match=msg):
+            run(change_options=change)
+    for change, msg in ((lambda st: setattr(st, "frames", 0), r"frames=0 must be an integer"),
+                        (lambda st: setattr(st.controls[0], "to", np.nan), r"to=nan"),
+                        (lambda st: setattr(st.controls[1].pattern, "g", np.nan), r"g=nan"),
+                        (lambda st: st.controls.append("x"), r"controls must be a list")):
+        with pytest.raises(LoadingError, match=msg):
+            run(change_stage=change)
+
+
+def test_controls_and_supports_belong_to_the_simulation_and_its_set_up():
+    """A control on another simulation's rigid point had silently driven this one's point of
+    that index; fix() after a run was silently ignored; a closed file silently stopped the
+    writing; a pattern that loads nothing free ran with no load; a non-zero displacement on a
+    fixed node moved the support; a model of fixed blocks only gave NaN residuals."""
+    m1, sim1, base1, top1 = _sim()
+    other = sim1.rigid_point("left", blocks=[top1])
+    m, sim, base, top = _sim()
+    sim.rigid_point("right", blocks=[top])
+    with pytest.raises(LoadingError, match=r"control Displacement: rigid point 'left' is not one "
+                                           r"of this simulation's"):
+        sim.run([Stage("s", 1, [Displacement(target=other, dof="z", to=-1e-7)])])
+    with pytest.raises(LoadingError, match=r"PointLoad 'p': rigid point 'left' is not one"):
+        sim.run([Stage("s", 1, [Load(pattern=PointLoad(other, "z", 1.0, name="p"), to=1.0)])])
+    for pattern in (BodyForce((1.0, 0.0, 0.0), blocks=[base]), Pressure(m.block_face(base, 1)[1])):
+        with pytest.raises(LoadingError, match=r"puts no force on any free DOF"):
+            sim.run([Stage("s", 1, [Load(pattern=pattern, to=1.0)])])
+    with pytest.raises(LoadingError, match=r"Combined 'combined': parts must be a non-empty"):
+        Combined([])
+    held = sim1.node_set("held", m1.block_nodes([base1])[:2])
+    sim1.run([Stage("zero", 1, [Displacement(target=held, dof="x", to=0.0)])])  # a reaction: ok
+    with pytest.raises(LoadingError, match=r"node 0 \(block 0\) is fixed in x .* would move a "
+                                           r"support"):
+        sim1.run([Stage("move", 1, [Displacement(target=held, dof="x", to=1e-4)])])
+    for late, what in ((lambda: sim1.fix([5]), "fix"),
+                       (lambda: sim1.node_set("late", [5]), "node set 'late'"),
+                       (lambda: sim1.contact_reaction("r", [top1], [base1]), "contact reaction 'r'"),
+                       (lambda: sim1.rigid_point("p2", nodes=[5]), "rigid point 'p2'")):
+        with pytest.raises(LoadingError, match=rf"{what} must be set before the first run"):
+            late()
+    fixed = Model()
+    fixed.add_box((0, 0, 0), (0.2, 0.1, 0.1), MAT, (2, 1, 1), fixed=True)
+    with pytest.raises(ModelError, match=r"every node is fixed"):
+        Simulation(fixed).run([Stage("g", 1, [Load(pattern=Gravity(), to=1.0)])])
+
+
+def test_a_closed_simulation_does_not_run_on(tmp_path):
+    m, sim, base, top = _sim()
+    sim = Simulation(m, SolverOptions(tol=1e-6), output=str(tmp_path / "c.h5"))
+    rp = sim.rigid_point("top", blocks=[top])
+    stage = Stage("s", 1, [Displacement(target=rp, dof="z", to=-1e-8)])
+    sim.run([stage])
+    sim.close()
+    with pytest.raises(ResultsError, match=r"c.h5 was closed \(Simulation.close\)"):
+        sim.run([stage])
+
+
 def test_result_files_missing_parts_and_damaged_checkpoints_are_named(tmp_path):
     p = tmp_path / "r.h5"
     write_fake_result(p)

@@ -52,6 +52,8 @@ def test_reference_parameters():
     (dict(tension=((1.5e6, 0, 0), (0.1e6, 0.01, 0.5), (0.1e6, 0.02, 0.3))), "damage"),
     (dict(Kc=0.4), "Kc"), (dict(dilation=0.0), "dilation"), (dict(damage_cap=1.0), "damage_cap"),
     (dict(tension=((1.5e6, 0, 0), (0.1e6, 1e-5, 0.0))), "snaps back"),
+    (dict(stays_elastic="no"), "stays_elastic must be True or False"),   # "no" was True
+    (dict(E=True), "E must be a finite number, got True"),               # was "snaps back"
 ])
 def test_validation(kw, word):
     with pytest.raises(MaterialError, match=word):

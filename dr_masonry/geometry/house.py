@@ -61,10 +61,13 @@ class HouseParams:
     half: bool = True
 
     def __post_init__(self):
+        if not isinstance(self.half, (bool, np.bool_)):   # "no" would count as True
+            raise GeometryError(f"HouseParams.half must be True or False, got {self.half!r}")
         for name in ("length", "depth", "storey_height", "pier_wide", "pier_narrow",
                      "lintel_height", "slab_thickness", "slab_element", "foundation_thickness"):
             v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+            if not (isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+                    and v > 0):
                 raise GeometryError(f"HouseParams.{name} must be a positive length in m, got {v!r}")
         for name in ("lintel_bearing", "slab_gap"):
             v = getattr(self, name)

@@ -92,7 +92,8 @@ class PlasticDamage:
         for name in ("E", "nu", "density", "eccentricity", "dilation", "fb0_fc0", "Kc",
                      "damage_cap", "h_ref"):
             v = getattr(self, name)
-            if not isinstance(v, (int, float, np.floating, np.integer)) or not math.isfinite(v):
+            if (not isinstance(v, (int, float, np.floating, np.integer))
+                    or isinstance(v, (bool, np.bool_)) or not math.isfinite(v)):
                 raise MaterialError(f"PlasticDamage.{name} must be a finite number, got {v!r}")
         if self.E <= 0:
             raise MaterialError(f"PlasticDamage.E must be > 0 Pa, got {self.E}")
@@ -100,6 +101,9 @@ class PlasticDamage:
             raise MaterialError(f"PlasticDamage.nu must be in (-1, 0.5), got {self.nu}")
         if self.density <= 0:
             raise MaterialError(f"PlasticDamage.density must be > 0 kg/m^3, got {self.density}")
+        if not isinstance(self.stays_elastic, (bool, np.bool_)):   # "no" would count as True
+            raise MaterialError(f"PlasticDamage.stays_elastic must be True or False, got "
+                                f"{self.stays_elastic!r}")
         p = np.zeros(kpd.NMP)
         lam = self.E * self.nu / ((1 + self.nu) * (1 - 2 * self.nu))
         p[kpd.MP_E], p[kpd.MP_NU], p[kpd.MP_LAM] = self.E, self.nu, lam
