@@ -243,6 +243,26 @@ def rp_residual(dyn, lam, rpres):
 
 
 @jit
+def rp_rayleigh(dyn, lam, rpres, gprev):
+    """Rayleigh sums of the free reference-point DOFs, for a model whose every node is fixed or
+    tied (its only motion is theirs): (num, den) = (V . dF, V . M V) with dF the change of the
+    points' generalised internal forces since ``gprev`` (n_rp, 6), which takes their current
+    value. ``rpres`` (n_rp, 6): :func:`rp_residual` at factor ``lam``; the internal part is
+    loads minus residual."""
+    num = 0.0
+    den = 0.0
+    for p in range(dyn.rpX.shape[0]):
+        for k in range(6):
+            g = dyn.rpf[p, k] + lam * dyn.rpP[p, k] - rpres[p, k]
+            if dyn.rpfree[p, k] > 0.0:
+                v = dyn.rpV[p, k]
+                num += v * (g - gprev[p, k])
+                den += v * v / dyn.rpminv[p, k]
+            gprev[p, k] = g
+    return num, den
+
+
+@jit
 def norms(dyn, lam, rpres):
     """(free residual norm, reference norm) in N; moments are divided by the points' radii."""
     rf = 0.0
@@ -418,7 +438,9 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, ring, tol, ref
         DAMP_* constant; ``alpha`` its parameter (local damping coefficient, the viscous
         damping scale, or FIRE's initial mixing factor alpha_start). With viscous damping the
         Rayleigh quotient (omega dt)^2 = V.dF / V.M.V of the motion (central differences are
-        stable for (omega dt)^2 < 4) is checked every iteration but the first of a span (whose
+        stable for (omega dt)^2 < 4; over the free node DOFs, or over the reference points' DOFs
+        when no node DOF is free: :func:`rp_rayleigh`) is checked every iteration but the first
+        of a span (whose
         dF holds the jump of the predictor or coarse correction, or forces of an earlier state
         after a restart; that iteration is undamped): ``UNSTABLE_COUNT`` iterations
         above ``UNSTABLE_RQ`` (the count ``info[I_OVER]`` halved every ``UNSTABLE_WINDOW``
@@ -479,8 +501,14 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, ring, tol, ref
     worst = 0
     kind = WHERE_NODE
     qty = 0.0
-    # viscous damping: Rayleigh quotient with the previous internal force
+    # viscous damping: Rayleigh quotient with the previous internal force (of the reference
+    # points when they are all that moves: a rigid block on a fixed one)
     fprev = dyn.fint.copy()
+    rp_only = scheme == DAMP_VISCOUS and nr > 0 and not np.any(dyn.free > 0.0)
+    gprev = np.zeros((nr, 6))
+    if rp_only:
+        rp_residual(dyn, lam, rpres)
+        rp_rayleigh(dyn, lam, rpres, gprev)
     seg = int(info[I_SEG])
     # kinetic damping: the last kinetic energy; FIRE: step factor, mixing factor, steps since
     # the last stop (a call that continues a span carries them on)
@@ -564,6 +592,10 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, ring, tol, ref
                 win_k += 1.0
         # ---- velocity update ----------------------------------------------------------
         c_visc = 0.0
+        if rp_only:
+            if not whole:
+                rp_residual(dyn, lam, rpres)
+            num, den = rp_rayleigh(dyn, lam, rpres, gprev)
         if scheme == DAMP_VISCOUS:
             if den > 0.0 and num > 0.0 and its > 1:
                 c_visc = alpha * 2.0 * np.sqrt(num / den)

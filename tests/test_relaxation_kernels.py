@@ -404,6 +404,30 @@ def test_rp_residual_is_the_virtual_work_of_the_tied_nodes(seed):
     assert np.allclose(rpres, rpres_np(d, d.res, lam), rtol=0, atol=1e-13)
 
 
+def test_rp_rayleigh_against_numpy():
+    """Rayleigh sums of the free point DOFs: num = V . (g - gprev), den = V . M V, where g =
+    rpf + lam rpP - rpres is the points' generalised internal force; gprev takes g (every
+    DOF, free or held)."""
+    rng = np.random.default_rng(4)
+    d = _two_points(rng)
+    d.rpV[:] = rng.standard_normal((2, 6))
+    d.rpminv[:] = rng.uniform(0.5, 2.0, (2, 6))
+    d.rpfree[:] = 1.0
+    d.rpfree[1, 2] = 0.0                      # a held DOF: not in the sums
+    d.rpf[:] = rng.standard_normal((2, 6))
+    d.rpP[:] = rng.standard_normal((2, 6))
+    rpres = rng.standard_normal((2, 6))
+    gprev = rng.standard_normal((2, 6))
+    old = gprev.copy()
+    lam = 0.7
+    num, den = R.rp_rayleigh(d, lam, rpres, gprev)
+    g = d.rpf + lam * d.rpP - rpres
+    free = d.rpfree > 0
+    assert num == pytest.approx((d.rpV * (g - old))[free].sum(), rel=1e-13)
+    assert den == pytest.approx((d.rpV ** 2 / d.rpminv)[free].sum(), rel=1e-13)
+    np.testing.assert_array_equal(gprev, g)
+
+
 # ------------------------------------------------------------------ 4. quad_shape
 CORNERS = np.array([(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)])
 

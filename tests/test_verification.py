@@ -267,3 +267,29 @@ def test_pressure_on_a_face_is_carried_to_the_support():
     assert np.allclose(sim.dyn.U[top, 2], -p * h / E, rtol=2e-3)
     base = np.nonzero(m.block_fixed[m.node_block])[0]
     assert -sim.dyn.fint[base, 2].sum() == pytest.approx(-p * b * t, rel=1e-6)
+
+
+# ------------------------------------------------------------------ 3: a block tied whole
+@pytest.mark.parametrize("law, k_c", [(JointLaw.reference(), 10 * 75e9),
+                                      (JointLaw.dry(0.5), None),
+                                      (JointLaw.tied(75e9, 7.5e9), 75e9)])
+def test_rigid_block_pressed_on_a_fixed_block(law, k_c):
+    """A block tied whole to a reference point and pressed by 100 N onto a fixed block: its
+    only motion is the point's, and it settles at u_z = -F / (k_c A) (k_c the closed joint's
+    compression stiffness, A = 0.2 x 0.1 m) in a few iterations. It had oscillated undamped to
+    the iteration cap (with the cohesive law the residual grew to twice the load): the viscous
+    damping's Rayleigh quotient summed free node DOFs only, and there are none."""
+    m = Model()
+    m.set_joint_law(law)
+    mat = PlasticDamage.elastic(10e9, 0.2, 2000.0)
+    m.add_box((0.0, 0.0, 0.0), (0.2, 0.1, 0.1), mat, (2, 1, 1), fixed=True)
+    top = m.add_box((0.0, 0.0, 0.1), (0.2, 0.1, 0.1), mat, (2, 1, 1))
+    sim = Simulation(m, SolverOptions(tol=1e-6, max_cuts=0, max_iter=5000))
+    rp = sim.rigid_point("top", blocks=[top])
+    hist = sim.run([Stage("press", 2, [Force(target=rp, dof="z", to=-100.0)])])
+    k_c = k_c or law.kc_pen
+    assert hist["top.uz"] == pytest.approx([-50.0 / (k_c * 0.02), -100.0 / (k_c * 0.02)],
+                                           rel=1e-5)
+    assert np.all(hist["iterations"] <= 100)
+    assert np.abs(hist["top.ux"]).max() < 1e-15 and np.abs(hist["top.ury"]).max() < 1e-12
+
