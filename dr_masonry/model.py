@@ -93,6 +93,22 @@ class ModelError(ValueError):
     """Invalid model input; the message names the block, parameter and value."""
 
 
+#: the most hexahedra one block may have: a run relaxes about 10^6 element-steps per second on
+#: 2 cores, so more is a typo in ``divisions`` (10^5 x 10^5 x 10^5 asked for 7 PiB of memory)
+MAX_BLOCK_ELEMENTS = 10_000_000
+
+
+def _numbers(what, value, shape):
+    """``value`` as a float64 array of ``shape``; ModelError naming ``what`` when it is not."""
+    try:
+        a = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ModelError(f"{what} must be numbers in m, got {value!r}") from None
+    if a.shape != shape:
+        raise ModelError(f"{what} must have shape {shape}, got {a.shape}: {value!r}")
+    return a
+
+
 def check_material(what, material, error=None):
     """``material`` if it looks like a PlasticDamage (has ``params_array``), else ``error``
     (default :class:`ModelError`) "<what> must be a PlasticDamage, got <material>"."""
@@ -217,9 +233,7 @@ class Model:
             name of a block group (``"wall"``, ``"beam"``, ...), see :attr:`groups`.
         """
         b = len(self._corners)
-        c = np.asarray(corners, dtype=np.float64)
-        if c.shape != (8, 3):
-            raise ModelError(f"block {b}: corners must have shape (8, 3), got {c.shape}")
+        c = _numbers(f"block {b}: corners", corners, (8, 3))
         if not np.all(np.isfinite(c)):
             raise ModelError(f"block {b}: corners contain NaN or Inf: {c.tolist()}")
         div = tuple(np.atleast_1d(np.asarray(divisions, dtype=object)))
@@ -227,6 +241,9 @@ class Model:
                 v, (int, np.integer)) or v < 1 for v in div):
             raise ModelError(f"block {b}: divisions must be three integers >= 1, got {divisions!r}")
         div = tuple(int(v) for v in div)
+        if div[0] * div[1] * div[2] > MAX_BLOCK_ELEMENTS:
+            raise ModelError(f"block {b}: divisions {div} make {div[0] * div[1] * div[2]:,} "
+                             f"hexahedra, more than MAX_BLOCK_ELEMENTS = {MAX_BLOCK_ELEMENTS:,}")
         check_material(f"block {b}: material", material)
         if not isinstance(fixed, (bool, np.bool_)):
             raise ModelError(f"block {b}: fixed must be True or False, got {fixed!r}")
@@ -265,9 +282,11 @@ class Model:
 
     def add_box(self, origin, size, material, divisions=(1, 1, 1), **kw):
         """Add an axis-aligned box block (minimum corner ``origin``, edge lengths ``size``, m)."""
-        size = np.asarray(size, dtype=np.float64)
-        if size.shape != (3,) or not np.all(size > 0):
-            raise ModelError(f"block {self.n_blocks}: box size must be 3 positive lengths, got {size}")
+        b = self.n_blocks
+        origin = _numbers(f"block {b}: box origin", origin, (3,))
+        size = _numbers(f"block {b}: box size", size, (3,))
+        if not np.all(size > 0):
+            raise ModelError(f"block {b}: box size must be 3 positive lengths, got {size}")
         return self.add_block(box_corners(origin, size), material, divisions, **kw)
 
     @staticmethod
@@ -356,8 +375,9 @@ class Model:
 
     def block(self, b):
         """A read-only :class:`Block` view of block ``b``."""
-        if not 0 <= b < self.n_blocks:
-            raise ModelError(f"block {b} does not exist (model has {self.n_blocks} blocks)")
+        if not (isinstance(b, (int, np.integer)) and not isinstance(b, (bool, np.bool_))
+                and 0 <= b < self.n_blocks):
+            raise ModelError(f"block {b!r} does not exist (model has {self.n_blocks} blocks)")
         s = self._node_start
         e = self._elem_start
         return Block(b, slice(s[b], s[b + 1]), slice(e[b], e[b + 1]), self._divisions[b],
@@ -407,6 +427,9 @@ class Model:
         planar faces).
         """
         from scipy.spatial import cKDTree
+        if not (isinstance(tol, (int, float, np.integer, np.floating))
+                and not isinstance(tol, (bool, np.bool_)) and np.isfinite(tol) and tol >= 0):
+            raise ModelError(f"check_overlaps: tol={tol!r} must be a finite length >= 0 m")
         c = self.block_corners
         if c.shape[0] < 2:
             return

@@ -27,7 +27,7 @@ from .kernels.hex8 import (corot_tables, hex_geometry_shared, inverted_element, 
 from .kernels.joint_law import JS_D, JS_DISS, JS_DISSF
 from .kernels.plastic_damage import MP_ELASTIC, MP_HMAX, MS_DC, MS_DISS, MS_DT
 from .materials import JointLaw, PlasticDamage
-from .model import ModelError, id_array, quad_area_vector
+from .model import Model, ModelError, id_array, quad_area_vector
 from .precompile import ensure_compiled
 from .results import (ResultsError, ResultWriter, check_stored, ends_run, make_folder, open_result,
                       require_kept, state_fields)
@@ -278,9 +278,16 @@ class Simulation:
 
     def __init__(self, model, options=None, output=None, config=None):
         from .contact_search import detect_contacts
+        if not isinstance(model, Model):
+            raise ModelError(f"Simulation: model must be a Model, got {model!r}")
+        if not (output is None or isinstance(output, (str, os.PathLike))):
+            raise ResultsError(f"Simulation: output must be a file path or None, got {output!r}")
+        if not (config is None or isinstance(config, dict)):
+            raise OptionsError(f"Simulation: config must be a dict of the input parameters, got "
+                               f"{config!r}")
         self.model = model
         self.options = options or SolverOptions()
-        self.output = output
+        self.output = output if output is None else os.fspath(output)
         self.config = dict(config or {})
         if not isinstance(self.options, SolverOptions):
             raise OptionsError(f"Simulation: options must be a SolverOptions, got "
@@ -339,7 +346,9 @@ class Simulation:
         """
         self._before_run(f"contact reaction {name!r}")
         self._check_name(name)
-        pair = (np.asarray(blocks, dtype=np.int64), np.asarray(support, dtype=np.int64))
+        nb = self.model.n_blocks
+        pair = (id_array(f"contact reaction {name!r}: blocks", blocks, nb, L.LoadingError),
+                id_array(f"contact reaction {name!r}: support", support, nb, L.LoadingError))
         on_slave, on_master = _reaction_rows(self.model.contacts.blocks, *pair)
         if not (on_slave.size or on_master.size):
             raise L.LoadingError(f"contact reaction {name!r}: no joint between the two block sets")
@@ -353,6 +362,9 @@ class Simulation:
                                  f"then)")
 
     def _check_name(self, name):
+        if not (isinstance(name, str) and name):   # history columns are "<name>.ux" ...
+            raise L.LoadingError(f"names of node sets, rigid points and contact reactions must "
+                                 f"be non-empty strings, got {name!r}")
         if name in self.contact_reactions:
             raise L.LoadingError(f"a contact reaction named {name!r} exists already")
         if name in self.node_sets or any(rp.name == name for rp in self.rigid_points):

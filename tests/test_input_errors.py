@@ -334,3 +334,41 @@ def test_a_damaged_checkpoint_is_named_on_resume(tmp_path, damage, msg):
         damage(f["checkpoint"])
     with pytest.raises(ResultsError, match=msg):
         setup(path).resume(path)
+
+
+def test_model_and_simulation_arguments_of_the_wrong_kind_are_named():
+    """Plain Python errors before (could not convert string to float, IndexError, TypeError,
+    AttributeError, a 7 PiB MemoryError): each names the argument and the value now."""
+    from dr_masonry.geometry import BrickSpec, GeometryError, plane_nodes
+    m = Model()
+    for call, msg in ((lambda: m.add_box((0, 0, 0), "abc", MAT), r"block 0: box size must be "
+                                                                 r"numbers in m, got 'abc'"),
+                      (lambda: m.add_box((0, 0), (1, 1, 1), MAT), r"box origin must have shape"),
+                      (lambda: m.add_block("abc", MAT), r"block 0: corners must be numbers"),
+                      (lambda: m.add_box((0, 0, 0), (1, 1, 1), MAT, (10 ** 5,) * 3),
+                       r"make 1,000,000,000,000,000 hexahedra, more than MAX_BLOCK_ELEMENTS"),
+                      (lambda: m.block("0"), r"block '0' does not exist"),
+                      (lambda: m.check_overlaps("x"), r"tol='x' must be a finite length")):
+        with pytest.raises(ModelError, match=msg):
+            call()
+    m, sim, base, top = _sim()
+    for call, msg in ((lambda: plane_nodes(m, 2.0, 0.0), r"axis must be 0, 1 or 2, got 2.0"),
+                      (lambda: plane_nodes(m, 2, "top"), r"value must be a finite coordinate"),
+                      (lambda: BrickSpec(nx_along=None), r"nx_along must be an integer >= 1"),
+                      (lambda: BrickSpec(nz_height=float("nan")), r"nz_height must be an integer")):
+        with pytest.raises(GeometryError, match=msg):
+            call()
+    with pytest.raises(ModelError, match=r"Simulation: model must be a Model, got None"):
+        Simulation(None)
+    with pytest.raises(OptionsError, match=r"config must be a dict"):
+        Simulation(m, config=[1, 2])
+    with pytest.raises(ResultsError, match=r"output must be a file path or None, got 5"):
+        Simulation(m, output=5)
+    for name in (None, 5, ""):
+        with pytest.raises(LoadingError, match=r"must be non-empty strings"):
+            sim.node_set(name, [5])
+    with pytest.raises(LoadingError, match=r"contact reaction 'c': blocks: id 7 is not an "
+                                           r"integer in \[0, 2\)"):   # was "no joint between"
+        sim.contact_reaction("c", [7], [0])
+    with pytest.raises(LoadingError, match=r"contact reaction 'c': support: id 'wall'"):
+        sim.contact_reaction("c", [1], "wall")

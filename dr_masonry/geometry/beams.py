@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..loading import is_number
 from .walls import BrickSpec, GeometryError, _material, _point
 
 #: default hexahedron edge lengths (x, y, z) of beams: those of the reference brick, so that a
@@ -57,7 +58,10 @@ def plane_nodes(model, axis, value, blocks=None, tol=1.0e-7):
 
     ``blocks`` restricts the search to these block ids (default: all blocks).
     """
-    if axis not in (0, 1, 2):
-        raise GeometryError(f"axis must be 0, 1 or 2, got {axis!r}")
+    if not (isinstance(axis, (int, np.integer)) and not isinstance(axis, (bool, np.bool_))
+            and axis in (0, 1, 2)):
+        raise GeometryError(f"plane_nodes: axis must be 0, 1 or 2, got {axis!r}")
+    if not is_number(value):
+        raise GeometryError(f"plane_nodes: value must be a finite coordinate in m, got {value!r}")
     ids = np.arange(model.n_nodes) if blocks is None else model.block_nodes(blocks)
     return ids[np.abs(model.nodes[ids, axis] - float(value)) <= tol].astype(np.int64)

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..loading import is_count, is_number
 from ..model import ModelError, check_material
 
 TOL = 1.0e-7  # m, geometric tolerance for coincident joints and edges
@@ -50,11 +51,11 @@ class BrickSpec:
     def __post_init__(self):
         for name in ("length", "height", "thickness"):
             v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+            if not (is_number(v) and v > 0):
                 raise GeometryError(f"BrickSpec.{name} must be a positive length in m, got {v!r}")
         for name in ("nx_along", "nz_height", "ny_thick"):
             v = getattr(self, name)
-            if int(v) != v or v < 1:
+            if not is_count(v, 1):
                 raise GeometryError(f"BrickSpec.{name} must be an integer >= 1, got {v!r}")
 
     @classmethod
