@@ -155,6 +155,9 @@ class ResultWriter:
         if mode == "w":
             if model is None:
                 raise ResultsError("ResultWriter: mode 'w' needs a model, got None")
+            if os.path.isfile(self.path) and not h5py.is_hdf5(self.path):
+                raise ResultsError(f"results file {self.path!r} exists and is not an HDF5 file: "
+                                   f"not overwritten (give another output path, or remove it)")
             arrays = model_arrays(model)
             self._require_space(_nbytes(arrays[0].values()), "the model")
             try:

@@ -197,6 +197,8 @@ def test_wall_tiles_its_box(n_half, n_courses, bond, direction, hole):
                     Opening(0.5, 2 * H, 0.3, 2 * H)]), "overlap"),
     (dict(openings=[Opening(0.3, 0, 0.3, 2 * H, Lintel(None, H, 0.1))]), "material"),
     (dict(brick="brick"), "brick"),
+    (dict(openings=Opening(0.1, 0, 0.3, 2 * H)), "openings must be a list of Opening"),
+    (dict(openings=[Opening(0.0, 0, 1.1, 6 * H)]), "its openings leave no brick"),  # was empty
 ])
 def test_wall_input_errors(kwargs, match):
     args = dict(origin=(0, 0, 0), length=1.1, height=6 * H, material=MAT)

@@ -315,3 +315,15 @@ def test_a_file_a_running_process_writes_is_read_with_a_warning(tmp_path):
     finally:
         holder.communicate(timeout=30)
     assert holder.returncode == 0
+
+
+def test_an_existing_file_that_is_not_a_results_file_is_not_overwritten(tmp_path):
+    """output="notes.txt" by mistake had replaced the notes by an HDF5 file."""
+    p = tmp_path / "notes.txt"
+    p.write_text("field notes")
+    with pytest.raises(ResultsError, match=r"notes.txt' exists and is not an HDF5 file"):
+        ResultWriter(p, tiny_model(), {})
+    assert p.read_text() == "field notes"
+    write_fake_result(tmp_path / "r.h5")
+    write_fake_result(tmp_path / "r.h5", n_rows=2)     # a results file: a new run replaces it
+    assert open_result(tmp_path / "r.h5").n_history == 2

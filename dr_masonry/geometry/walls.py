@@ -216,6 +216,8 @@ def _plan_openings(openings, length, n_courses, brick, reserved=()):
     """
     h = brick.height
     rects = []
+    if not isinstance(openings, (list, tuple)):
+        raise GeometryError(f"openings must be a list of Opening, got {openings!r}")
     for i, o in enumerate(openings):
         if not isinstance(o, Opening):
             raise GeometryError(f"openings[{i}] must be an Opening, got {o!r}")
@@ -349,6 +351,9 @@ def _build(model, frame, length, n_courses, brick, material, rects, offset, end_
             div = frame.divisions(brick.along_divisions(r.s1 - r.s0), brick.ny_thick,
                                   brick.nz_height * (r.c1 - r.c0))
             plan.append((-1, o, sz, div, lt.material, lt.joint, lt.group))
+    if not any(k >= 0 for k, *_ in plan):
+        raise GeometryError(f"wall of {length:.3f} x {n_courses * h:.3f} m: its openings leave "
+                            f"no brick")
     courses, lintels = [[] for _ in range(n_courses)], []
     for k, o, sz, div, mat, jnt, grp in plan:
         b = model.add_box(o, sz, mat, div, joint=jnt, group=grp)
