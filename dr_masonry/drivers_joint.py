@@ -42,8 +42,9 @@ def drive_joint(law, path, state=None):
     path : (n, 3) array_like, m
         total gaps [u, d1, d2] (u > 0 opening); the path starts at gap 0.
     state : (NJS,) array_like or None
-        history at the start (e.g. the last row of an earlier response's ``state``); None: the
-        virgin state ``law.initial_state()``.
+        history at the start (e.g. the last row of an earlier response's ``state``): finite,
+        damage in [0, 1], largest opening and slip >= 0; None: the virgin state
+        ``law.initial_state()``.
 
     Returns
     -------
@@ -58,9 +59,17 @@ def drive_joint(law, path, state=None):
     if bad.any():
         i = int(np.argmax(bad))
         raise JointLawError(f"drive_joint: path point {i} is not finite: {path[i].tolist()}")
-    s0 = law.initial_state() if state is None else np.array(state, dtype=np.float64)
-    if s0.shape != (jk.NJS,) or not np.all(np.isfinite(s0)):
-        raise JointLawError(f"drive_joint: state must be {jk.NJS} finite numbers, got {s0}")
+    try:
+        s0 = law.initial_state() if state is None else np.array(state, dtype=np.float64)
+    except (TypeError, ValueError):
+        s0 = None
+    if s0 is None or s0.shape != (jk.NJS,) or not np.all(np.isfinite(s0)):
+        raise JointLawError(f"drive_joint: state must be {jk.NJS} finite numbers, got {state!r}")
+    for i, name, hi in ((jk.JS_D, "damage D", 1.0), (jk.JS_UMAX, "largest opening u_max", None),
+                        (jk.JS_DMAX, "largest slip delta_max", None)):
+        if not (s0[i] >= 0.0 and (hi is None or s0[i] <= hi)):
+            raise JointLawError(f"drive_joint: state[{i}] ({name}) = {s0[i]} must be "
+                                + ("in [0, 1]" if hi else ">= 0"))
     path = np.ascontiguousarray(path)
     t = np.empty((path.shape[0], 3))
     states = np.empty((path.shape[0], jk.NJS))

@@ -11,7 +11,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .kernels import plastic_damage as kpd
-from .materials.plastic_damage import MaterialError
+from .loading import is_number
+from .materials.plastic_damage import MaterialError, PlasticDamage
 
 _VOIGT = ((0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1))
 
@@ -42,11 +43,25 @@ class MaterialPath:
     flags: np.ndarray
 
 
-def _h(material, h):
+def _h(what, material, h):
+    """The element length of a drive: ``h`` (m) checked against ``material``, or its h_ref."""
+    if not isinstance(material, PlasticDamage):
+        raise MaterialError(f"{what}: material must be a PlasticDamage, got {material!r}")
     if h is None:
         return material.h_ref
+    if not is_number(h):
+        raise MaterialError(f"{what}: h={h!r} must be a finite number of m (the element "
+                            "characteristic length) or None")
     material.check_element_size(h)
     return float(h)
+
+
+def _floats(what, name, value):
+    """``value`` as a float64 array, else :class:`MaterialError` naming ``what`` and ``name``."""
+    try:
+        return np.array(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise MaterialError(f"{what}: {name} must be an array of numbers, got {value!r}") from None
 
 
 def drive_mixed(material, eps, free, h=None, tol=1e-8, max_iter=200):
@@ -66,7 +81,8 @@ def drive_mixed(material, eps, free, h=None, tol=1e-8, max_iter=200):
     tol : float
         convergence of the free stresses, relative to max(|stress|, 1e-4 E0).
     """
-    eps = np.array(eps, dtype=np.float64)
+    h = _h("drive_mixed", material, h)
+    eps = _floats("drive_mixed", "eps", eps)
     if eps.ndim != 2 or eps.shape[1] != 6 or not np.all(np.isfinite(eps)):
         raise MaterialError(f"eps must be a finite (n, 6) array, got shape {eps.shape}")
     free = np.asarray(free)
@@ -76,7 +92,6 @@ def drive_mixed(material, eps, free, h=None, tol=1e-8, max_iter=200):
         raise MaterialError(f"tol={tol!r} must be a float in (0, 1)")
     if not (isinstance(max_iter, (int, np.integer)) and max_iter >= 1):
         raise MaterialError(f"max_iter={max_iter!r} must be an integer >= 1")
-    h = _h(material, h)
     p = material.params_array()
     n = eps.shape[0]
     s_old = material.initial_state()
@@ -133,7 +148,9 @@ def drive_mixed(material, eps, free, h=None, tol=1e-8, max_iter=200):
                 x = x + dx
                 r = rn
             if not ok:
-                raise DriverError(f"step {k}: free stresses {r} Pa did not vanish in {max_iter} iterations")
+                raise DriverError(f"step {k}: free stresses {r} Pa did not vanish in {max_iter} "
+                                  f"iterations: the strain step to {eps[k, ~free].tolist()} is too "
+                                  "large; a path of more, smaller steps converges")
             cur[fi] = x
         kpd.gp_update(p, h, cur, s_old, s_new, sig)
         out_e[k] = cur
@@ -155,7 +172,14 @@ def drive_material(material, eps_xx, h=None):
 
     Returns a :class:`MaterialPath` whose ``stress`` is sigma_xx (n,) Pa.
     """
-    e = np.asarray(eps_xx, dtype=np.float64).ravel()
+    _h("drive_material", material, h)
+    e = _floats("drive_material", "eps_xx", eps_xx)
+    if e.ndim != 1:
+        raise MaterialError(f"drive_material: eps_xx must be a 1-D path of strains (n,), got "
+                            f"shape {e.shape}")
+    if not np.all(np.isfinite(e)):
+        i = int(np.argmax(~np.isfinite(e)))
+        raise MaterialError(f"drive_material: eps_xx[{i}] = {e[i]} is not finite")
     eps = np.zeros((e.size, 6))
     eps[:, 0] = e
     res = drive_mixed(material, eps, [False, True, True, True, True, True], h)
@@ -166,7 +190,8 @@ def drive_material(material, eps_xx, h=None):
 def drive_strain_path(material, eps, h=None):
     """Prescribed total strain tensors ``eps`` (n, 3, 3); returns a :class:`MaterialPath` with
     ``stress`` (n, 3, 3) Pa."""
-    eps = np.asarray(eps, dtype=np.float64)
+    _h("drive_strain_path", material, h)
+    eps = _floats("drive_strain_path", "eps", eps)
     if eps.ndim != 3 or eps.shape[1:] != (3, 3):
         raise MaterialError(f"eps must have shape (n, 3, 3), got {eps.shape}")
     if not np.all(np.isfinite(eps)):

@@ -2,7 +2,11 @@
 in each (what an engineer compares between cycles and between models)."""
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
+
+from .loading import is_number
 
 
 class PostprocessError(ValueError):
@@ -49,8 +53,8 @@ def energy_per_cycle(history, key, rows=None, force=None):
 
     Parameters
     ----------
-    history : dict of (n,) arrays
-        a run's history (``Simulation.history`` or ``Result.history``).
+    history : dict of (n,) arrays, Result or Simulation
+        a run's history (``Simulation.history`` or ``Result.history``, or the run itself).
     key : str
         the control displacement column (e.g. ``"beam.ux"``).
     rows : (n,) bool, optional
@@ -72,20 +76,41 @@ def energy_per_cycle(history, key, rows=None, force=None):
         are those of the whole model: give the force acting on it (a half model's own, not the
         whole building's).
     """
+    if not isinstance(history, Mapping) and isinstance(getattr(history, "history", None), Mapping):
+        history = history.history
+    if not isinstance(history, Mapping):
+        raise PostprocessError(f"energy_per_cycle: history must be a dict of columns (a run's "
+                               f".history) or the run, got {type(history).__name__}")
+    for name, k in (("key", key), ("force", force)):
+        if not isinstance(k, str) and (name == "key" or k is not None):
+            raise PostprocessError(f"energy_per_cycle: {name}={k!r} must be a history column name")
     need = (key, "D_blocks", "D_joints", "W_ext") + ((force,) if force is not None else ())
     for k in need:
         if k not in history:
             raise PostprocessError(f"energy_per_cycle: no history column {k!r}")
+    lengths = {k: len(history[k]) for k in need}
+    if len(set(lengths.values())) > 1:
+        raise PostprocessError(f"energy_per_cycle: history columns of different lengths: "
+                               f"{', '.join(f'{k!r} {n}' for k, n in lengths.items())}")
     sel = np.ones(len(history[key]), bool) if rows is None else np.asarray(rows, bool)
     if sel.shape != (len(history[key]),):
         raise PostprocessError(f"energy_per_cycle: rows has shape {sel.shape}, the history has "
                                f"{len(history[key])} rows")
     if not sel.any():
         raise PostprocessError("energy_per_cycle: rows selects no row of the history")
+    first = np.flatnonzero(sel)[0]
+    for k in need:   # the rows used (and the energies' row before the first)
+        used = np.flatnonzero(sel)
+        if k in ("D_blocks", "D_joints", "W_ext") and first > 0:
+            used = np.r_[first - 1, used]
+        v = np.asarray(history[k], dtype=np.float64)[used]
+        if not np.all(np.isfinite(v)):
+            j = int(np.argmax(~np.isfinite(v)))
+            raise PostprocessError(f"energy_per_cycle: history column {k!r} row {used[j]} is "
+                                   f"{float(v[j])}, not a finite number")
     u = np.asarray(history[key])[sel]
     cum = {k: np.asarray(history[k])[sel] for k in ("D_blocks", "D_joints", "W_ext")}
     f = np.asarray(history[force])[sel] if force is not None else None
-    first = np.flatnonzero(sel)[0]
     before = {k: (np.asarray(history[k])[first - 1] if first > 0 else 0.0) for k in cum}
     out = []
     for i, (a, b) in enumerate(cycle_bounds(u)):
@@ -105,8 +130,25 @@ def energy_per_cycle(history, key, rows=None, force=None):
 
 
 def cycle_text(cycles, u_unit=1e-3, f_unit=1e3):
-    """Per-cycle table of :func:`energy_per_cycle` (with ``force``) as text lines:
-    displacements in ``u_unit`` m (default mm), forces in ``f_unit`` (default kN), energies J."""
+    """Per-cycle table of :func:`energy_per_cycle` as text lines: displacements in ``u_unit`` m
+    (default mm), forces in ``f_unit`` (default kN), energies J. Cycles without ``force`` give
+    the amplitude instead of the peaks, forces and xi_eq."""
+    for name, v in (("u_unit", u_unit), ("f_unit", f_unit)):
+        if not (is_number(v) and v > 0):
+            raise PostprocessError(f"cycle_text: {name}={v!r} must be a finite number > 0")
+    cycles = list(cycles)
+    peaks = all("u_max" in c for c in cycles)
+    need = ("cycle", "D_total", "D_joints", "D_blocks") + (
+        ("u_max", "u_min", "F_max", "F_min", "xi_eq") if peaks else ("amplitude",))
+    for i, c in enumerate(cycles):
+        missing = [k for k in need if k not in c]
+        if missing:
+            raise PostprocessError(f"cycle_text: cycle {i} lacks {missing}; give the list "
+                                   "energy_per_cycle returns")
+    if not peaks:
+        return "\n".join(["cycle  amplitude  dissipated (joints / blocks) J"] + [
+            f"{c['cycle']:5d} {c['amplitude'] / u_unit:10.2f}  {c['D_total']:10.2f} "
+            f"({c['D_joints']:.2f} / {c['D_blocks']:.2f})" for c in cycles])
     lines = ["cycle  u_max  u_min   F_max   F_min  dissipated (joints / blocks) J  xi_eq"]
     for c in cycles:
         lines.append(f"{c['cycle']:5d} {c['u_max'] / u_unit:6.2f} {c['u_min'] / u_unit:6.2f} "

@@ -468,6 +468,24 @@ def test_drive_joint_validates_path():
     assert empty.state.shape == (0, jk.NJS)
 
 
+def test_drive_joint_validates_state():
+    """A given start state is checked (D = 5 gave a compressive traction under opening)."""
+    for index, value, word in [
+            (jk.JS_D, 5.0, r"state\[0\] \(damage D\) = 5.0 must be in \[0, 1\]"),
+            (jk.JS_D, -0.1, r"damage D\) = -0.1 must be in \[0, 1\]"),
+            (jk.JS_UMAX, -1e-3, r"largest opening u_max\) = -0.001 must be >= 0"),
+            (jk.JS_DMAX, -1e-3, r"largest slip delta_max\) = -0.001 must be >= 0"),
+            (jk.JS_DP1, np.inf, "state must be 10 finite numbers")]:
+        s = REF.initial_state()
+        s[index] = value
+        with pytest.raises(JointLawError, match=word):
+            drive_joint(REF, [[1e-5, 0.0, 0.0]], state=s)
+    with pytest.raises(JointLawError, match="state must be 10 finite numbers, got 'abc'"):
+        drive_joint(REF, [[1e-5, 0.0, 0.0]], state="abc")
+    first = drive_joint(REF, [[1e-4, 0.0, 0.0]])   # an earlier response's state continues
+    assert drive_joint(REF, [[2e-4, 0.0, 0.0]], state=first.state[-1]).damage[0] > first.damage[0]
+
+
 def test_case_script_writes_outputs(tmp_path):
     from dr_masonry.cases import joint as case
     params = dict(case.PARAMS, steps=200)

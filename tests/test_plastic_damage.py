@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from dr_masonry.drivers_material import drive_material, drive_mixed, drive_strain_path
+from dr_masonry.drivers_material import DriverError, drive_material, drive_mixed, drive_strain_path
 from dr_masonry.kernels import plastic_damage as k
 from dr_masonry.materials.plastic_damage import MaterialError, PlasticDamage
 from dr_masonry.units import MPa, mm
@@ -67,6 +67,27 @@ def test_element_size_check():
         REF.check_element_size(10 * REF.max_element_size)
     with pytest.raises(MaterialError):
         REF.check_element_size(-1.0)
+
+
+@pytest.mark.parametrize("call, word", [
+    (lambda: drive_material(REF, [[1e-5, 2e-5], [3e-5, 4e-5]]), r"eps_xx must be a 1-D path .* shape \(2, 2\)"),
+    (lambda: drive_material(REF, "abc"), "eps_xx must be an array of numbers, got 'abc'"),
+    (lambda: drive_material(REF, [0.0, np.nan]), r"eps_xx\[1\] = nan is not finite"),
+    (lambda: drive_material(None, [1e-5]), "drive_material: material must be a PlasticDamage, got None"),
+    (lambda: drive_material(REF, [1e-5], h="5cm"), "drive_material: h='5cm' must be a finite number"),
+    (lambda: drive_mixed(REF, "abc", [True] * 6), "drive_mixed: eps must be an array of numbers"),
+    (lambda: drive_strain_path(None, np.zeros((1, 3, 3))), "drive_strain_path: material must be"),
+])
+def test_driver_input_errors(call, word):
+    with pytest.raises(MaterialError, match=word):
+        call()
+
+
+def test_too_large_step_says_so():
+    """One 1 % step cannot be followed by the free components; the message says what converges."""
+    with pytest.raises(DriverError, match="step 0: .* too large; a path of more, smaller steps"):
+        drive_material(REF, [1e-2])
+    assert drive_material(REF, np.linspace(0, 1e-2, 5)).dt[-1] > 0.5
 
 
 @pytest.mark.parametrize("sign, rows, emax", [(1, REF.tension, 0.012), (-1, REF.compression, 0.07)])

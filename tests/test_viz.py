@@ -1,5 +1,6 @@
 """VTK time series, renders and plots, read back and checked against the written data."""
 import os
+import re
 import xml.etree.ElementTree as ET
 
 import numpy as np
@@ -160,6 +161,26 @@ def test_render_errors(h5, tmp_path):
         render_model(h5, tmp_path / "x.png", view="diagonal")
 
 
+def test_render_size_empty_model_and_output(h5, tmp_path):
+    """size must be two pixel counts in [1, MAX_PIXELS]; an empty model and a bad output path
+    are named; a missing output folder is created."""
+    from dr_masonry.model import Model
+    for size in [(0, 0), (-5, 100), "big", (100000, 100000), (400.5, 300)]:
+        msg = r"size must be \(width, height\), two integers in \[1, 10000\] pixels, got "
+        with pytest.raises(RenderError, match=msg + re.escape(repr(size))):
+            render_model(h5, tmp_path / "x.png", size=size, backend="matplotlib")
+    with pytest.raises(RenderError, match="render_model: the model has no blocks"):
+        render_model(Model(), tmp_path / "x.png", backend="matplotlib")
+    with pytest.raises(RenderError, match="render_model: png must be a file path, got None"):
+        render_model(h5, None, backend="matplotlib")
+    with pytest.raises(RenderError, match=r"png='.*x.xyz' must end in one of .*\.png"):
+        render_model(h5, tmp_path / "x.xyz", backend="matplotlib")
+    with pytest.raises(RenderError, match=r"png='.*x.jpg' must end in one of \.png$"):
+        render_model(h5, tmp_path / "x.jpg", backend="vtk")   # VTK writes PNG only
+    out = render_model(h5, tmp_path / "new" / "m.png", size=(300, 200), backend="matplotlib")
+    assert imread(out.path).shape[:2] == (200, 300)
+
+
 def test_plot_history_overlay(h5, tmp_path):
     other = tmp_path / "other.h5"
     write_fake_result(other, n_rows=3)
@@ -170,6 +191,21 @@ def test_plot_history_overlay(h5, tmp_path):
         plots.plot_history(h5, "drift", "force", tmp_path / "x.png")
     with pytest.raises(plots.PlotError, match="2 labels for 1 runs"):
         plots.plot_history(h5, "disp", "force", tmp_path / "x.png", label=["a", "b"])
+    for scale in ("xscale", "yscale"):
+        for bad in (0, np.nan, "1"):
+            with pytest.raises(plots.PlotError, match=f"plot_history: {scale}={bad!r} must be"):
+                plots.plot_history(h5, "disp", "force", tmp_path / "x.png", **{scale: bad})
+    with pytest.raises(plots.PlotError, match="results is empty"):
+        plots.plot_history([], "disp", "force", tmp_path / "x.png")
+    with pytest.raises(plots.PlotError, match="plot_history: png must be a file path, got None"):
+        plots.plot_history(h5, "disp", "force", None)
+    with pytest.raises(plots.PlotError, match=r"plot_history: png='.*x.xyz' must end in one of"):
+        plots.plot_history(h5, "disp", "force", tmp_path / "x.xyz")
+    (tmp_path / "file").write_text("")
+    with pytest.raises(plots.PlotError, match="cannot create the output folder .*file"):
+        plots.plot_history(h5, "disp", "force", tmp_path / "file" / "x.png")
+    assert_picture(plots.plot_history(h5, "disp", "force", tmp_path / "new" / "h.png"),
+                   min_colours=3, min_ink=0.02)
 
 
 def test_plot_history_marks_rows_accepted_above_tol(tmp_path, monkeypatch):
@@ -204,3 +240,29 @@ def test_crack_map(h5, tmp_path):
                    min_colours=2, min_ink=0.02)
     with pytest.raises(plots.PlotError, match="no block group 'roof'"):
         plots.crack_map(h5, 0, tmp_path / "x.png", blocks="roof")
+
+
+@pytest.mark.parametrize("kw, word", [
+    (dict(field="U"), r"field='U' is not a contact field of frame -1; its contact fields are "
+                      r"\['D', 'opening', 'slip'\]"),
+    (dict(field="foo"), "field='foo' is not a contact field"),
+    (dict(blocks=[99]), r"blocks: id 99 is not an integer in \[0, 2\)"),
+    (dict(blocks=[-1]), r"blocks: id -1 is not an integer in \[0, 2\)"),
+    (dict(threshold="a"), "threshold='a' must be a finite number >= 0"),
+    (dict(threshold=np.nan), "threshold=nan must be a finite number >= 0"),
+    (dict(threshold=-0.1), "threshold=-0.1 must be a finite number >= 0"),
+    (dict(png=None), "png must be a file path, got None"),
+    (dict(png="x.xyz"), "png='x.xyz' must end in one of"),
+])
+def test_crack_map_errors(h5, tmp_path, kw, word):
+    kw = {"png": tmp_path / "x.png", **kw}
+    with pytest.raises(plots.PlotError, match=f"crack_map: {word}"):
+        plots.crack_map(h5, -1, **kw)
+    assert not os.path.exists(tmp_path / "x.png")
+
+
+def test_crack_map_of_joints_of_some_blocks_into_a_new_folder(h5, tmp_path):
+    png = plots.crack_map(h5, -1, tmp_path / "new" / "c.png", field="opening", blocks=[0],
+                          threshold=0.0)
+    assert png == str(tmp_path / "new" / "c.png")
+    assert_picture(png, min_colours=2, min_ink=0.02)

@@ -209,6 +209,38 @@ def test_equivalent_damping_by_hand(tmp_path):
     assert table["xi_eq"] == pytest.approx(c["xi_eq"]) and table["D_total"] == pytest.approx(8.0)
 
 
+def test_energy_per_cycle_input_errors(tmp_path):
+    """A run is read through its history; a key that is not a name, columns of unequal length
+    and a non-finite value in a used column are named; the table without forces lists the
+    amplitudes; bad units are refused."""
+    from dr_masonry.postprocess import cycle_text
+    from dr_masonry.results import ResultWriter
+    from test_results import tiny_model
+    u = np.array([0, 1, 2, 1, 0, -1, -2, -1, 0.0]) * 1e-3
+    f = np.array([0, 10, 15, 16, 0, -10, -14, -4, 0.0]) * 1e3
+    h = dict(u=u, F=f, D_blocks=np.linspace(0, 2, 9), D_joints=np.linspace(0, 6, 9),
+             W_ext=np.linspace(0, 9, 9))
+    p = tmp_path / "run.h5"
+    with ResultWriter(p, tiny_model(), {}) as w:
+        for i in range(9):
+            w.append_history({k: v[i] for k, v in h.items()})
+    assert energy_per_cycle(open_result(p), "u", force="F") == energy_per_cycle(h, "u", force="F")
+    with pytest.raises(PostprocessError, match=r"key=\['u'\] must be a history column name"):
+        energy_per_cycle(h, ["u"])
+    with pytest.raises(PostprocessError, match="different lengths: 'u' 9, .*'F' 5"):
+        energy_per_cycle(dict(h, F=f[:5]), "u", force="F")
+    bad = f.copy()
+    bad[3] = np.nan
+    with pytest.raises(PostprocessError, match="column 'F' row 3 is nan"):
+        energy_per_cycle(dict(h, F=bad), "u", force="F")
+    assert energy_per_cycle(dict(h, F=bad), "u")[0]["D_total"] == 8.0   # F unused
+    lines = cycle_text(energy_per_cycle(h, "u")).splitlines()
+    assert "amplitude" in lines[0] and lines[1].split()[:3] == ["1", "2.00", "8.00"]
+    for unit in ("u_unit", "f_unit"):
+        with pytest.raises(PostprocessError, match=f"cycle_text: {unit}=0 must be"):
+            cycle_text(energy_per_cycle(h, "u", force="F"), **{unit: 0})
+
+
 def test_cycle_bounds_of_protocols():
     u = cyclic_path([1.0, 2.0], 2, 3)
     b = cycle_bounds(u)

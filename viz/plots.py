@@ -10,7 +10,10 @@ import numpy as np
 from matplotlib.collections import LineCollection, PolyCollection
 from matplotlib.figure import Figure
 
-from .render import HEX_EDGES
+from dr_masonry.loading import is_number
+from dr_masonry.model import id_array
+
+from .render import HEX_EDGES, output_file
 from .vtk_series import as_result, block_corner_nodes, positions
 
 #: in-plane axes of an elevation: plane name -> (horizontal, vertical) coordinate indices
@@ -40,9 +43,9 @@ def plot_history(results, x_key, y_key, png, xscale=1e3, yscale=1e-3, label=None
     y_key : str or list of str
         history column(s) (SI); several give one line each (e.g. the reactions of each wall).
     png : str
-        output file.
+        output file (its extension gives the format; its folder is created).
     xscale, yscale : float
-        factors applied to the SI values (default m -> mm and N -> kN).
+        non-zero factors applied to the SI values (default m -> mm and N -> kN).
     label : str or list of str, optional
         legend entries (default: the file names). Rows accepted above the run's tolerance (at a
         residual floor, ``SolverOptions.floor_tol``) are marked with open circles.
@@ -54,18 +57,28 @@ def plot_history(results, x_key, y_key, png, xscale=1e3, yscale=1e-3, label=None
     str
         ``png``.
     """
+    for name, scale in (("xscale", xscale), ("yscale", yscale)):
+        if not (is_number(scale) and scale != 0):
+            raise PlotError(f"plot_history: {name}={scale!r} must be a finite non-zero number")
     runs = [as_result(r) for r in (results if isinstance(results, (list, tuple)) else [results])]
+    if not runs:
+        raise PlotError("plot_history: results is empty; give at least one run")
     labels = label if isinstance(label, (list, tuple)) else [label] * len(runs)
     if len(labels) != len(runs):
         raise PlotError(f"plot_history: {len(labels)} labels for {len(runs)} runs")
+    ys = list(y_key) if isinstance(y_key, (list, tuple)) else [y_key]
+    if not ys:
+        raise PlotError("plot_history: y_key is empty; give at least one history column")
+    png = output_file("plot_history", png, error=PlotError)
     fig = Figure(figsize=(6.4, 4.8))
     ax = fig.add_subplot()
-    ys = list(y_key) if isinstance(y_key, (list, tuple)) else [y_key]
     for r, lab in zip(runs, labels):
         for key in [x_key] + ys:
             if key not in r.history:
                 raise PlotError(f"plot_history: {r.path} has no history column {key!r}; "
                                 f"columns are {list(r.history)}")
+        if not r.n_history:
+            raise PlotError(f"plot_history: {r.path} has no history rows to plot")
         tol, floor = r.rows_above_tol()
         name = lab or os.path.basename(r.path)
         for j, key in enumerate(ys):
@@ -100,11 +113,12 @@ def crack_map(result, frame, png, threshold=0.5, field="D", plane="xz", blocks=N
         frame position (negative from the end), or the last checkpoint (a run stopped between
         frames).
     png : str
-        output file.
+        output file (its extension gives the format; its folder is created).
     threshold : float
-        contact points with ``field`` above it are drawn, coloured by its value.
+        contact points with ``field`` above it (a finite number >= 0) are drawn, coloured by
+        its value.
     field : str
-        contact field to map (default joint damage "D").
+        contact field of the frame to map (default joint damage "D").
     plane : {"xz", "yz", "xy"}
         projection plane (x-z: a wall along x).
     blocks : array_like of int or str, optional
@@ -124,6 +138,8 @@ def crack_map(result, frame, png, threshold=0.5, field="D", plane="xz", blocks=N
         raise PlotError(f"crack_map: element_field must be 'dt' or 'dc', got {element_field!r}")
     if plane not in PLANES:
         raise PlotError(f"crack_map: plane must be one of {sorted(PLANES)}, got {plane!r}")
+    if not (is_number(threshold) and threshold >= 0):
+        raise PlotError(f"crack_map: threshold={threshold!r} must be a finite number >= 0")
     a, b = PLANES[plane]
     arrays = r.model_arrays
     nb = len(arrays["block_divisions"])
@@ -134,10 +150,17 @@ def crack_map(result, frame, png, threshold=0.5, field="D", plane="xz", blocks=N
             raise PlotError(f"crack_map: no block group {blocks!r}; groups are {r.group_names}")
         sel = r.groups[blocks]
     else:
-        sel = np.asarray(blocks, dtype=np.int64)
+        sel = id_array("crack_map: blocks", blocks, nb, PlotError)
     keep = np.zeros(nb, bool)
     keep[sel] = True
     fields = r.frame(frame)
+    joint = sorted(k for k, v in r.locations(frame).items()
+                   if v == "contact" and np.ndim(fields.get(k)) == 1)
+    # a model without joints has no contact field: the default "D" then draws none
+    if not isinstance(field, str) or field not in joint and (joint or field != "D"):
+        raise PlotError(f"crack_map: field={field!r} is not a contact field of frame {frame!r}; "
+                        f"its contact fields are {joint}")
+    png = output_file("crack_map", png, error=PlotError)
     x = positions(arrays["nodes"], fields, warp)
     fig = Figure(figsize=(8, 6))
     ax = fig.add_subplot()
@@ -158,7 +181,7 @@ def crack_map(result, frame, png, threshold=0.5, field="D", plane="xz", blocks=N
     seg = x[corners[:, HEX_EDGES]][:, :, :, [a, b]].reshape(-1, 2, 2)
     ax.add_collection(LineCollection(seg, colors="0.3", linewidths=0.5))
     con = r.contacts(frame)
-    if con is not None and field in fields:
+    if con is not None and field in joint:
         v = fields[field]
         on = (v > threshold) & keep[con["blocks"][:, 0]]
         xs = x[con["slave"][on]]

@@ -22,7 +22,7 @@ from typing import NamedTuple
 import numpy as np
 
 from dr_masonry.model import HEX_FACE_CORNERS, Model
-from dr_masonry.results import Result, model_arrays, open_result
+from dr_masonry.results import Result, ResultsError, make_folder, model_arrays, open_result
 
 from .vtk_series import block_corner_nodes, positions
 
@@ -42,6 +42,8 @@ DAMAGE_FIELDS = ("dt", "dc", "D")
 #: the 12 edges of a hexahedron (corner indices)
 HEX_EDGES = np.array([[0, 1], [1, 2], [2, 3], [3, 0], [4, 5], [5, 6], [6, 7], [7, 4],
                       [0, 4], [1, 5], [2, 6], [3, 7]])
+#: largest picture width or height, pixels
+MAX_PIXELS = 10000
 
 _PROBE = """
 import vtk
@@ -64,6 +66,27 @@ class Rendered(NamedTuple):
 
 class RenderError(ValueError):
     """Bad arguments to a rendering function."""
+
+
+def output_file(what, png, formats=None, error=RenderError):
+    """``png`` as a str path, its folder created; ``error`` naming ``what`` and the value unless
+    it is a file path whose extension is one of ``formats`` (default: those matplotlib writes)."""
+    if formats is None:
+        from matplotlib.backend_bases import FigureCanvasBase
+        formats = sorted(FigureCanvasBase.get_supported_filetypes())
+    path = os.fspath(png) if isinstance(png, (str, os.PathLike)) else None
+    if not isinstance(path, str) or not path:
+        raise error(f"{what}: png must be a file path, got {png!r}")
+    if os.path.splitext(path)[1][1:].lower() not in formats:
+        raise error(f"{what}: png={path!r} must end in one of "
+                    f"{', '.join('.' + f for f in formats)}")
+    if os.path.isdir(path):
+        raise error(f"{what}: png={path!r} is a folder, not a file")
+    try:
+        make_folder(os.path.dirname(path) or ".")
+    except ResultsError as e:
+        raise error(f"{what}: png={path!r}: {e}") from None
+    return path
 
 
 @functools.lru_cache(maxsize=1)
@@ -92,11 +115,15 @@ def _scene(model_or_h5, field, frame, warp):
         if field is not None or frame is not None:
             raise RenderError("render_model: a Model has no fields; give a results file for "
                               f"field={field!r} / frame={frame!r}")
+        if not model_or_h5.n_blocks:
+            raise RenderError("render_model: the model has no blocks to draw")
         arrays, names = model_arrays(model_or_h5)
         fields, where, contacts = {}, {}, None
     else:
         r = model_or_h5 if isinstance(model_or_h5, Result) else open_result(model_or_h5)
         arrays, names = r.model_arrays, r.group_names
+        if not len(arrays["block_divisions"]):
+            raise RenderError(f"render_model: the model of {r.path} has no blocks to draw")
         if frame is None and field is not None:
             frame = -1
         fields = r.frame(frame) if frame is not None else {}
@@ -156,6 +183,7 @@ def render_model(model_or_h5, png, field=None, frame=None, warp=1.0, view="iso",
         displacement magnification of the drawn positions.
     view : {"iso", "front", "back", "side", "top"}
     size : (width, height) pixels
+        two integers in [1, :data:`MAX_PIXELS`].
     backend : {"vtk", "matplotlib"}, optional
         default: see :func:`choose_backend`.
 
@@ -166,10 +194,16 @@ def render_model(model_or_h5, png, field=None, frame=None, warp=1.0, view="iso",
     """
     if view not in VIEWS:
         raise RenderError(f"render_model: view must be one of {sorted(VIEWS)}, got {view!r}")
+    if (not isinstance(size, (tuple, list, np.ndarray)) or len(size) != 2
+            or not all(isinstance(v, (int, np.integer)) and not isinstance(v, (bool, np.bool_))
+                       and 1 <= v <= MAX_PIXELS for v in size)):
+        raise RenderError(f"render_model: size must be (width, height), two integers in "
+                          f"[1, {MAX_PIXELS}] pixels, got {size!r}")
+    size = (int(size[0]), int(size[1]))
     backend = choose_backend(backend)
+    png = output_file("render_model", png, ["png"] if backend == "vtk" else None)
     scene = _scene(model_or_h5, field, frame, warp)
     crange = (0.0, max(len(scene["names"]) - 1, 1)) if field is None else _range(scene, field)
-    png = os.fspath(png)
     (_render_vtk if backend == "vtk" else _render_mpl)(scene, png, crange, view, size, field)
     return Rendered(png, backend)
 
