@@ -1,6 +1,7 @@
 """Scene parameters: ``key=value`` overrides of a case's PARAMS defaults, checked and typed."""
 import ast
 import json
+import math
 import os
 import sys
 
@@ -26,7 +27,10 @@ def _coerce(key, text, default):
                 raise ValueError("expected an integer")
             return int(v)
         if isinstance(default, float):
-            return float(text)
+            v = float(text)
+            if not math.isfinite(v):   # inf and nan would surface later, under another name
+                raise ValueError("expected a finite number")
+            return v
         if isinstance(default, str):
             return text
         if isinstance(default, (list, tuple)):

@@ -36,6 +36,8 @@ def test_parse_overrides_types():
     ("cyclic=maybe", r"parameter cyclic='maybe': cannot convert to bool"),
     ("mesh=2,x", r"parameter mesh='x'"),
     ("opts=[1]", r"cannot convert to dict"),
+    ("drift=inf", r"parameter drift='inf': .*\(expected a finite number"),   # was "control N:
+    ("drift=nan", r"parameter drift='nan'"),                                # to=-inf" later
 ])
 def test_parse_overrides_errors(arg, msg):
     with pytest.raises(ParameterError, match=msg):
