@@ -183,10 +183,12 @@ class ResultWriter:
             self._sizes = json.loads(self._f["model"].attrs["sizes"])
             if model is not None:
                 got = _model_sizes(model)
-                if got != self._sizes:
+                differs = (f"model sizes {got} do not match file {self.path} sizes {self._sizes}"
+                           if got != self._sizes else _model_difference(self._f["model"], model))
+                if differs:
                     self._f.close()
-                    raise ResultsError(f"ResultWriter: model sizes {got} do not match file "
-                                       f"{self.path} sizes {self._sizes}")
+                    raise ResultsError(f"ResultWriter: {differs} (not the model the file was run "
+                                       f"with)")
             cfg = self._f["config"]
             restarts = json.loads(cfg.attrs.get("restarts", "[]"))
             restarts.append({"time": time.strftime("%Y-%m-%dT%H:%M:%S"), "code_version": code_version(),
@@ -449,6 +451,31 @@ def _n_rows(history_group):
 def _columns(history_group):
     """History column names in the order of the first row ([] before the first row)."""
     return json.loads(history_group.attrs.get("columns", "[]"))
+
+
+def _model_difference(stored, model):
+    """What differs between the open file's ``/model`` group ``stored`` and ``model`` of the same
+    sizes: node coordinates (beyond 1 nm), connectivity, or a parameter of a material or joint
+    law that both versions describe ("" when nothing does)."""
+    dx = np.abs(stored["nodes"][()] - model.nodes)
+    if dx.size and dx.max() > 1e-9:
+        i = int(np.argmax(dx.max(axis=1)))
+        return f"node {i} lies {dx.max():.3g} m from where it was"
+    if not np.array_equal(stored["elements"][()], model.elements):
+        return "the hexahedra's connectivity differs"
+    for key, objs in (("materials", model.materials), ("joint_laws", model.joint_laws)):
+        old = json.loads(stored.attrs[key])
+        new = json.loads(_json([_describe(x) for x in objs]))
+        if len(old) != len(new):
+            return f"{len(new)} {key} instead of {len(old)}"
+        for i, (a, b) in enumerate(zip(old, new)):
+            pa, pb = a.get("params", {}), b.get("params", {})
+            keys = sorted(k for k in set(pa) & set(pb) if not k.startswith("_") and pa[k] != pb[k])
+            if a["type"] != b["type"] or keys:
+                return (f"{key[:-1].replace('_', ' ')} {i} differs"
+                        + (f" in {', '.join(f'{k} {pa[k]!r} -> {pb[k]!r}' for k in keys)}"
+                           if keys else f": {a['type']} -> {b['type']}"))
+    return ""
 
 
 def _model_sizes(model):

@@ -372,3 +372,32 @@ def test_model_and_simulation_arguments_of_the_wrong_kind_are_named():
         sim.contact_reaction("c", [7], [0])
     with pytest.raises(LoadingError, match=r"contact reaction 'c': support: id 'wall'"):
         sim.contact_reaction("c", [1], "wall")
+
+
+def test_resume_of_a_file_of_another_model_of_the_same_sizes_is_refused(tmp_path):
+    """Only the node, element and contact counts were compared: a longer block, another
+    material or joint law resumed the other model's state with a few energy-balance warnings."""
+    path = str(tmp_path / "base.h5")
+
+    def build(length=0.2, mat=MAT, law=JointLaw.dry(0.5)):
+        m = Model()
+        m.set_joint_law(law)
+        m.add_box((0, 0, 0), (length, 0.1, 0.1), mat, (2, 1, 1), fixed=True)
+        top = m.add_box((0, 0, 0.1), (length, 0.1, 0.1), mat, (2, 1, 1))
+        sim = Simulation(m, SolverOptions(tol=1e-6))
+        rp = sim.rigid_point("top", blocks=[top])
+        return sim, [Stage("s", 2, [Displacement(target=rp, dof="z", to=-1e-8)])]
+    sim, stages = build()
+    sim.output = path
+    sim.run([Stage("s", 1, stages[0].controls)])
+    sim.close()
+    for change, msg in ((dict(length=0.4), r"node 2 lies 0.2 m from where it was"),
+                        (dict(mat=PlasticDamage.elastic(20e9, 0.2, 2000.0)),
+                         r"material 0 differs in E 10000000000.0 -> 20000000000.0"),
+                        (dict(law=JointLaw.dry(0.6)), r"joint law 0 differs in .*mu 0.5 -> 0.6")):
+        other, stages = build(**change)
+        with pytest.raises(ResultsError, match=msg + r" \(not the model the file was run with\)"):
+            other.resume(path)
+    same, stages = build()
+    same.resume(path)
+    assert same.run(stages)["top.uz"][-1] == pytest.approx(-1e-8)
