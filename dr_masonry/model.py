@@ -85,7 +85,9 @@ def id_array(what, ids, n, error=None):
     else:   # bools, strings, objects: none of them is an id
         bad = np.ones(a.shape, dtype=bool)
     if bad.any():
-        raise error(f"{what}: id {a[np.argmax(bad)].item()!r} is not an integer in [0, {n})")
+        v = a[np.argmax(bad)]
+        raise error(f"{what}: id {v.item() if hasattr(v, 'item') else v!r} is not an integer "
+                    f"in [0, {n})")
     return a.astype(np.int64)
 
 

@@ -589,6 +589,8 @@ def _reading(path):
 
 def check_file(path):
     """Raise :class:`ResultsError` unless ``path`` is a dr_masonry results file of this schema."""
+    if not isinstance(path, (str, os.PathLike)):
+        raise ResultsError(f"a results file must be given as a path, got {path!r}")
     path = os.fspath(path)
     if os.path.isdir(path):
         raise ResultsError(f"results file {path!r} is a directory")

@@ -748,6 +748,10 @@ class Simulation:
                                  f"{stages!r}")
         # fields changed since the options and stages were made (sim.options.max_iter = 2.5)
         self.options.__post_init__()
+        for mon in self.monitors:
+            if not callable(mon):
+                raise OptionsError(f"Simulation.monitors: {mon!r} is not a function "
+                                   f"monitor(sim, info, done)")
         for stage in stages:
             L.check_stage(stage)
         if self._closed:

@@ -362,6 +362,7 @@ def test_default_house():
                                        (dict(heads=(2.187, 0.5)), "sill"),
                                        (dict(storey_height=0.2), "storey_height"),
                                        (dict(half="no"), "half must be True or False"),
+                                       (dict(sills=None), "sills must be a list of heights"),
                                        (dict(length=True), "length must be a positive length")])
 def test_house_errors(kw, match):
     m = Model()

@@ -290,7 +290,7 @@ def test_scene_parameters_and_resume_are_checked(tmp_path, capsys):
         (["run", "squat_wall", "fast=true", "out="], "parameter out=''"),
         (["run", "squat_wall", "fast=true", f"out={tmp_path}/"], "must name the results' path"),
         (["run", "couplet", "out="], "parameter out=''"),
-        (["run", "squat_wall", "fast=true", "drift=nan"], "the monotonic target"),
+        (["run", "squat_wall", "fast=true", "drift=nan"], "drift='nan': cannot convert to float"),
         (["run", "triplet", "sigmas=-0.2"], "parameter sigmas=(-0.2,)"),  # tension: ran away
         (["run", "triplet", "sigmas="], "at least one pre-compression"),
         (["run", "joint", "steps=0"], "parameter steps=0"),               # wrote empty CSVs
@@ -372,6 +372,14 @@ def test_model_and_simulation_arguments_of_the_wrong_kind_are_named():
         sim.contact_reaction("c", [7], [0])
     with pytest.raises(LoadingError, match=r"contact reaction 'c': support: id 'wall'"):
         sim.contact_reaction("c", [1], "wall")
+    with pytest.raises(LoadingError, match=r"fix: id None is not an integer"):   # AttributeError
+        sim.fix(None)
+    for path in (None, 5):
+        with pytest.raises(ResultsError, match=r"a results file must be given as a path"):
+            open_result(path)
+    sim.monitors.append("print")                       # a TypeError once the run started
+    with pytest.raises(OptionsError, match=r"monitors: 'print' is not a function"):
+        sim.run([Stage("s", 1, [Load(pattern=Gravity(), to=1.0)])])
 
 
 def test_resume_of_a_file_of_another_model_of_the_same_sizes_is_refused(tmp_path):

@@ -28,6 +28,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ..loading import is_count, is_number
 from .beams import add_foundation, add_slab, plane_nodes
 from .walls import (TOL, BrickSpec, GeometryError, Lintel, Opening, _build, _Frame, _material,
                     _plan_openings, _running)
@@ -75,10 +76,14 @@ class HouseParams:
                 raise GeometryError(f"HouseParams.{name} must be a length >= 0 m, got {v!r}")
         for name in ("n_storeys", "slabs_per_floor"):
             v = getattr(self, name)
-            if int(v) != v or v < 1:
+            if not is_count(v, 1):
                 raise GeometryError(f"HouseParams.{name} must be an integer >= 1, got {v!r}")
         for name in ("sills", "heads"):
-            if len(getattr(self, name)) != self.n_storeys:
+            v = getattr(self, name)
+            if not (isinstance(v, (list, tuple)) and all(is_number(x) for x in v)):
+                raise GeometryError(f"HouseParams.{name} must be a list of heights in m, got "
+                                    f"{v!r}")
+            if len(v) != self.n_storeys:
                 raise GeometryError(f"HouseParams.{name} needs one value per storey "
                                     f"({self.n_storeys}), got {getattr(self, name)!r}")
         if not isinstance(self.brick, BrickSpec):
