@@ -102,5 +102,3 @@ S5 = Protocol("S5", (0.025, 0.05, 0.1, 0.15, 0.2, 0.3, 0.4, 0.5, 0.75), 2, 1.0)
 S6 = Protocol("S6", tuple(a * mm for a in (2, 5, 10, 15, 20, 30)), 1, 40 * mm, unit="m")
 #: S7 terraced house: top displacement (m), one cycle each, monotonic to 60 mm.
 S7 = Protocol("S7", tuple(a * mm for a in (2.5, 5, 10, 20, 30, 40, 50, 60)), 1, 60 * mm, unit="m")
-
-PROTOCOLS = {p.name: p for p in (S4, S5, S6, S7)}

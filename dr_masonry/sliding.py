@@ -53,7 +53,8 @@ SINK = 0.5
 
 
 class Sliding:
-    """Re-pairing state of a :class:`~dr_masonry.solver.Simulation`'s contact set (after build).
+    """Re-pairing state of a :class:`~dr_masonry.solver.Simulation`'s contact set (after build;
+    the simulation makes one only for a model with contacts).
 
     Attributes
     ----------
@@ -77,13 +78,13 @@ class Sliding:
         c = sim.model.contacts
         self.area0 = c.area.copy()
         self.u_ref = c.gap0[:, 0].copy()
-        edge = element_edge(sim.model)[c.blocks[:, 0]] if c.n else np.zeros(0)
+        edge = element_edge(sim.model)[c.blocks[:, 0]]
         self.behind_tol = BEHIND * edge
         self.sink_tol = SINK * edge
         self.sunk = np.zeros(c.n)
         self.blocks = c.blocks.copy()
         x = sim.model.nodes
-        self.outside0 = self._outside(x) if c.n else np.zeros(0)
+        self.outside0 = self._outside(x)
         self.diss_off = np.zeros(2)
         self.changed = False
 
@@ -103,8 +104,6 @@ class Sliding:
         displacements; returns the number of points re-paired, dropped or taken back."""
         sim = self.sim
         cont = sim.cont
-        if cont.slave.size == 0:
-            return 0
         x = sim.dyn.X + sim.dyn.U
         self._rise(x)
         out = self._outside(x)

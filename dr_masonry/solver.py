@@ -768,12 +768,9 @@ class Simulation:
                     self.presc[(ctl.target.name, k)] = (ctl.target.nodes, k)
         k0, i0, starts = self._resume_position(stages) if self._resuming else (0, 0, None)
         self._resuming = False
-        try:
-            from tqdm.auto import tqdm
-        except ImportError:  # pragma: no cover
-            tqdm = None
+        from tqdm.auto import tqdm
         total = sum(s.increments for s in stages[k0:]) - i0
-        self._bar = tqdm(total=total, disable=not self.options.progress, unit="incr") if tqdm else None
+        self._bar = tqdm(total=total, disable=not self.options.progress, unit="incr")
         try:
             with terminate_as_interrupt():   # SIGTERM stops the run as Ctrl-C does
                 ensure_compiled(self.mesh, self.cont, self.dyn)
@@ -854,7 +851,6 @@ class Simulation:
                 self._pattern(ctl.pattern)
         start_values = [[list(key), float(starts[key])] for key in targets]
         self.stage_name = stage.name
-        self.stage_indirect = indirect
         for i in range(first, n):
             # a checkpoint inside increment i (after a committed part of a cut increment)
             # continues it from there
@@ -1129,9 +1125,7 @@ class Simulation:
         cont.s_old[:] = cont.s_new
         self._mark_pristine()
         self.energy["E_damped"] += info[R.I_DAMPED]
-        wd = mesh.wdet.sum(axis=1)
-        vol = mesh.wdet
-        d_blocks = float((mesh.s_old[:, :, MS_DISS] * vol).sum())
+        d_blocks = float((mesh.s_old[:, :, MS_DISS] * mesh.wdet).sum())
         off = self.sliding.diss_off if self.sliding is not None else np.zeros(2)
         d_joints = float(cont.s_old[:, JS_DISS] @ cont.area + off[0]) if cont.slave.size else 0.0
         d_friction = float(cont.s_old[:, JS_DISSF] @ cont.area + off[1]) if cont.slave.size else 0.0
@@ -1147,8 +1141,8 @@ class Simulation:
                "E_damped": self.energy["E_damped"], "E_kinetic": info[R.I_KE],
                "balance_error": err / self.energy["W_gross"] if self.energy["W_gross"] > 0 else 0.0,
                "max_joint_damage": float(cont.s_old[:, JS_D].max()) if cont.slave.size else 0.0,
-               "max_dt": float(mesh.s_old[:, :, MS_DT].max()) if wd.size else 0.0,
-               "max_dc": float(mesh.s_old[:, :, MS_DC].max()) if wd.size else 0.0,
+               "max_dt": float(mesh.s_old[:, :, MS_DT].max()),   # (a model has elements)
+               "max_dc": float(mesh.s_old[:, :, MS_DC].max()),
                "max_overhang": self._check_overhang()}
         for rp in self.rigid_points:
             for name, k in L.DOFS.items():
@@ -1224,8 +1218,8 @@ class Simulation:
             self._balance[1] += 1
             c, blocks = self.cont, self.model.element_block
             top = [k for k in np.argsort(joint_diss)[::-1][:3] if joint_diss[k] > 0.0]
-            e = int(np.argmax(element_diss)) if element_diss.size else -1
-            e = e if e >= 0 and element_diss[e] > 0.0 else -1
+            e = int(np.argmax(element_diss))
+            e = e if element_diss[e] > 0.0 else -1
             held = joint_diss[top].sum() + (element_diss[e] if e >= 0 else 0.0)
             where = "; ".join([f"joint point {k} (node {c.slave[k]}, blocks {self._pair(k)}) "
                                f"{joint_diss[k]:.3g} J" for k in top]
@@ -1296,7 +1290,7 @@ class Simulation:
         meta = {"values": [[list(k), v] for k, v in self.values.items()],
                 "factors": self.factors, "energy": self.energy, "dctl_prev": self.dctl_prev,
                 "history": {k: v for k, v in self.history.items()}, "patterns": [],
-                "stage": list(self.stage_position) if self.stage_position else None}
+                "stage": list(self.stage_position)}
         for name, (pat, P, rpP) in self.patterns.items():
             arrays[f"pattern_P/{name}"] = P
             arrays[f"pattern_rpP/{name}"] = rpP

@@ -57,7 +57,7 @@ def test_brick_reference():
     assert (b.length, b.height, b.thickness) == (0.22, 0.081, 0.102)
     assert (b.nx_along, b.nz_height, b.ny_thick) == (4, 1, 2)
     assert b.half_length == pytest.approx(0.11)
-    assert b.half_divisions == (2, 1, 2)
+    assert b.along_divisions(b.half_length) == 2
     assert b.element_size == pytest.approx((0.055, 0.051, 0.081))
     with pytest.raises(GeometryError, match="height"):
         BrickSpec(height=-0.08)

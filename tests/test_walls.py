@@ -13,7 +13,7 @@ from dr_masonry.cases import slender_wall, squat_wall
 from dr_masonry.loading import LoadingError
 from dr_masonry.params import ParameterError
 from dr_masonry.postprocess import PostprocessError, cycle_bounds, energy_per_cycle
-from dr_masonry.protocols import PROTOCOLS, S4, S5
+from dr_masonry.protocols import S4, S5, S6, S7
 from dr_masonry.results import open_result
 from dr_masonry.viz.plots import crack_map
 from interrupt import interrupt_after
@@ -60,7 +60,7 @@ def test_protocols_documented_amplitudes():
     assert S5.amplitudes == (0.025, 0.05, 0.1, 0.15, 0.2, 0.3, 0.4, 0.5, 0.75)
     assert S4.amplitudes == (0.05, 0.1, 0.2, 0.3, 0.5, 0.75, 1.0, 1.5, 2.0)
     assert (S4.cycles, S5.cycles, S4.monotonic, S5.monotonic) == (2, 2, 2.5, 1.0)
-    assert PROTOCOLS["S6"].cycles == PROTOCOLS["S7"].cycles == 1
+    assert S6.cycles == S7.cycles == 1
     h = 2.75
     p = S5.path(h, step=0.5e-3)
     # peaks of the path: each amplitude reached twice in each direction, in order

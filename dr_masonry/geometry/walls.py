@@ -7,7 +7,7 @@ Conventions
   from its base (m); course ``k`` occupies ``z in [k h, (k + 1) h]`` with ``h`` the brick height.
 * Every course is the wall's extent minus its voids (openings, lintels, the other wall's share of
   a corner); each remaining segment is cut at the bond's vertical joints ``offset + i * length``.
-  Pieces shorter than ``min_piece`` (default a quarter brick) are merged into their neighbour, so
+  Pieces shorter than a quarter brick are merged into their neighbour, so
   jambs and ends stay straight and no sliver units appear.
 * Blocks are axis-aligned boxes meshed ``(along, thickness, height)`` =
   ``(round(nx_along * piece / length), ny_thick, nz_height)`` hexahedra, mapped to (x, y, z) for a
@@ -71,11 +71,6 @@ class BrickSpec:
     def along_divisions(self, piece_length):
         """Hexahedra along a (full, half or cut) unit of length ``piece_length`` (m)."""
         return max(1, int(round(self.nx_along * piece_length / self.length)))
-
-    @property
-    def half_divisions(self):
-        """(along, height, thickness) hexahedra of a half brick, e.g. (2, 1, 2)."""
-        return (self.along_divisions(self.half_length), self.nz_height, self.ny_thick)
 
     @property
     def element_size(self):
@@ -326,14 +321,14 @@ class _Frame:
 
 
 def _build(model, frame, length, n_courses, brick, material, rects, offset, end_voids,
-           group="wall", joint=None, min_piece=None):
+           group="wall", joint=None):
     """Plan and add the blocks of one wall; returns a :class:`Wall`.
 
     ``offset(k)`` gives the bond's joint offset (m) of course k, ``end_voids(k)`` extra void
     intervals of course k (corners); ``group`` is a name or a callable ``(s0, s1) -> name``.
     """
     h, t = brick.height, brick.thickness
-    min_piece = 0.25 * brick.length if min_piece is None else min_piece
+    min_piece = 0.25 * brick.length
     group_of = group if callable(group) else (lambda s0, s1: group)
     plan = []  # (course or -1, origin, size, divisions, material, joint, group)
     for k in range(n_courses):
