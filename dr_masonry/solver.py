@@ -25,7 +25,8 @@ from .kernels.forces import Cont, Mesh
 from .kernels.hex8 import (corot_tables, hex_geometry_shared, inverted_element, lumped_mass,
                            pristine_elements, stiffness_rowsum)
 from .kernels.joint_law import JS_D, JS_DISS, JS_DISSF
-from .kernels.plastic_damage import MP_ELASTIC, MP_HMAX, MS_DC, MS_DISS, MS_DT
+from .kernels.plastic_damage import (FLAG_RETURN, MP_ELASTIC, MP_HMAX, MS_DC, MS_DISS, MS_DT,
+                                     MS_FLAG)
 from .materials import JointLaw, PlasticDamage
 from .model import Model, ModelError, id_array, quad_area_vector
 from .precompile import ensure_compiled
@@ -1144,6 +1145,7 @@ class Simulation:
                "max_dt": float(mesh.s_old[:, :, MS_DT].max()),   # (a model has elements)
                "max_dc": float(mesh.s_old[:, :, MS_DC].max()),
                "max_overhang": self._check_overhang()}
+        self._check_return_mapping()
         for rp in self.rigid_points:
             for name, k in L.DOFS.items():
                 row[f"{rp.name}.u{name}"] = d.rpU[rp.index, k]
@@ -1173,6 +1175,23 @@ class Simulation:
                                       f"{self.last_residual:.1e} it={self.last_iters}")
         if self.writer is not None:
             self.writer.append_history(row)
+
+    def _check_return_mapping(self):
+        """Warns once per run when a Gauss point's plastic-damage return mapping has stopped
+        short of its tolerance (the sticky ``FLAG_RETURN`` bit of its committed state): its
+        stress is approximate there."""
+        if "return" in self._warned:
+            return
+        flags = self.mesh.s_old[:, :, MS_FLAG].astype(np.int64) & FLAG_RETURN
+        bad = np.flatnonzero(flags)
+        if bad.size:
+            self._warned.add("return")
+            e, g = divmod(int(bad[0]), flags.shape[1])
+            more = f" (and {bad.size - 1} other points)" if bad.size > 1 else ""
+            warnings.warn(f"increment {self.increment}: the plastic-damage return mapping stopped "
+                          f"short of its tolerance at Gauss point {g} of element {e} (block "
+                          f"{self.model.element_block[e]}){more}: the stress there is "
+                          f"approximate", RuntimeWarning)
 
     def _check_overhang(self):
         """Largest distance (m) by which a joint node has slid off its master block's face (the

@@ -334,3 +334,19 @@ def test_resume_file_without_stage_position(tmp_path):
         target=sim3.rigid_points[0], dof="z", path=pull.path * 1.5, name="pull")])
     with pytest.raises(LoadingError, match="not at the value of increment 8"):
         sim3.run([shifted])
+
+
+def test_a_return_mapping_short_of_its_tolerance_is_reported():
+    """The plastic-damage kernel marks a Gauss point whose return mapping stopped short of its
+    tolerance (a sticky bit of its state); nothing in a run read it. A run now warns once,
+    naming the point and the element."""
+    from dr_masonry.kernels.plastic_damage import FLAG_RETURN, MS_FLAG
+    sim, stages = couplet.build(dict(couplet.PARAMS, increments=4, h5=None))
+    sim.build()
+    for state in (sim.mesh.s_old, sim.mesh.s_new):    # as the kernel leaves a failed point
+        state[1, 3, MS_FLAG] = FLAG_RETURN
+    with pytest.warns(RuntimeWarning, match=r"increment 1: the plastic-damage return mapping "
+                                            r"stopped short of its tolerance at Gauss point 3 "
+                                            r"of element 1 \(block 0\)") as got:
+        sim.run(stages)
+    assert sum("return mapping" in str(w.message) for w in got) == 1   # once per run
