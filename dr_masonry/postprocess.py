@@ -98,9 +98,10 @@ def energy_per_cycle(history, key, rows=None, force=None):
                                f"{len(history[key])} rows")
     if not sel.any():
         raise PostprocessError("energy_per_cycle: rows selects no row of the history")
-    first = np.flatnonzero(sel)[0]
+    rows_used = np.flatnonzero(sel)
+    first = rows_used[0]
     for k in need:   # the rows used (and the energies' row before the first)
-        used = np.flatnonzero(sel)
+        used = rows_used
         if k in ("D_blocks", "D_joints", "W_ext") and first > 0:
             used = np.r_[first - 1, used]
         v = np.asarray(history[k], dtype=np.float64)[used]

@@ -63,6 +63,9 @@ CONTACT_ARRAYS = {
 REQUIRED = ("config", "history", "frames", "model/block_group",
             *(f"model/{name}" for name in MODEL_ARRAYS))
 
+#: rows of one chunk of a history column (the unit in which the file grows as rows are added)
+HISTORY_CHUNK = 1024
+
 #: free disk space (bytes) that a write must leave: HDF5's metadata, the space that replaced
 #: checkpoints leave in the file, the scene's CSV, plot and VTK written after the run
 SPACE_RESERVE = 16 * 2**20
@@ -236,7 +239,8 @@ class ResultWriter:
             if bad:
                 raise ResultsError(f"append_history: invalid column names {bad}")
             for k in row:
-                h.create_dataset(k, shape=(0,), maxshape=(None,), dtype=np.float64, chunks=(1024,))
+                h.create_dataset(k, shape=(0,), maxshape=(None,), dtype=np.float64,
+                                 chunks=(HISTORY_CHUNK,))
             cols = list(row)
             h.attrs["columns"] = _json(cols)
         elif set(row) != set(cols):
@@ -248,7 +252,8 @@ class ResultWriter:
             # a restart by a newer version may add columns: NaN in the rows written before
             n = h[cols[0]].shape[0]
             for k in extra:
-                h.create_dataset(k, data=np.full(n, np.nan), maxshape=(None,), chunks=(1024,))
+                h.create_dataset(k, data=np.full(n, np.nan), maxshape=(None,),
+                                 chunks=(HISTORY_CHUNK,))
             cols = cols + extra
             h.attrs["columns"] = _json(cols)
         values = {}
@@ -259,8 +264,8 @@ class ResultWriter:
                 raise ResultsError(f"append_history: column {k!r} value {row[k]!r} is not a number") \
                     from None
         n = h[cols[0]].shape[0]
-        if n % 1024 == 0:   # a new chunk of 1024 rows for every column
-            self._require_space(8 * 1024 * len(cols), f"history row {n + 1}")
+        if n % HISTORY_CHUNK == 0:   # a new chunk for every column
+            self._require_space(8 * HISTORY_CHUNK * len(cols), f"history row {n + 1}")
         for k, v in values.items():
             h[k].resize((n + 1,))
             h[k][n] = v
@@ -558,9 +563,14 @@ def ends_run(position):
     return bool(position) and position[0] == position[3] - 1 and position[1] == position[4]
 
 
+def _locked(e):
+    """Whether an OSError of ``h5py.File`` is HDF5's refusal of a file another process holds."""
+    return "unable to lock file" in str(e)
+
+
 def _open_error(e):
     """What an OSError of ``h5py.File`` means for the user."""
-    if "unable to lock file" in str(e):
+    if _locked(e):
         return "another process has it open (a run still writing it?)"
     return e.strerror or str(e)
 
@@ -577,7 +587,7 @@ def _reading(path):
     try:
         return h5py.File(path, "r")
     except OSError as e:
-        if "unable to lock file" not in str(e):
+        if not _locked(e):
             raise
     if path not in _UNLOCKED:
         _UNLOCKED.add(path)
