@@ -306,11 +306,15 @@ class ResultWriter:
             raise ResultsError(f"write_frame: frame {inc} already exists in {self.path}")
         sizes = dict(self._sizes)
         if contacts is not None:
+            missing = [k for k in CONTACT_ARRAYS if not hasattr(contacts, k)]
+            if missing:
+                raise ResultsError(f"write_frame: contacts of frame {inc} lack {', '.join(missing)}"
+                                   " (pass a ContactSet)")
             sizes["contact"] = int(np.asarray(contacts.slave).shape[0])
         checked = {k: _check_field(k, v, sizes) for k, v in fields.items()}
         self._require_space(_nbytes(a for a, _ in checked.values()) + (
-            0 if contacts is None else _nbytes(getattr(contacts, k) for k in CONTACT_ARRAYS
-                                               if hasattr(contacts, k))), f"frame {inc}")
+            0 if contacts is None else _nbytes(getattr(contacts, k) for k in CONTACT_ARRAYS)),
+            f"frame {inc}")
         g = frames.create_group(name)
         g.attrs["increment"] = inc
         g.attrs["history_rows"] = self.n_history
@@ -490,8 +494,7 @@ def _model_sizes(model):
 
 def _write_contacts(g, contacts):
     for name, dtype in CONTACT_ARRAYS.items():
-        if hasattr(contacts, name):
-            g.create_dataset(name, data=np.asarray(getattr(contacts, name), dtype=dtype))
+        g.create_dataset(name, data=np.asarray(getattr(contacts, name), dtype=dtype))
 
 
 def _check_field(name, value, sizes):

@@ -12,8 +12,10 @@ import h5py
 import numpy as np
 import pytest
 
+from dr_masonry.contact_search import ContactSet
 from dr_masonry.model import Model
-from dr_masonry.results import (SCHEMA_VERSION, ResultsError, ResultWriter, open_result)
+from dr_masonry.results import (CONTACT_ARRAYS, SCHEMA_VERSION, ResultsError, ResultWriter,
+                                open_result)
 
 
 @dataclasses.dataclass
@@ -162,6 +164,16 @@ def test_frame_contact_set(tmp_path):
     r = open_result(tmp_path / "r.h5")
     assert len(r.contacts(0)["slave"]) == 6
     np.testing.assert_array_equal(r.contacts(1)["slave"], m.contacts.slave[:3])
+
+
+def test_frame_contact_set_complete(tmp_path):
+    """The stored contact layout is ContactSet's; a set lacking a field is refused, not cut."""
+    assert list(CONTACT_ARRAYS) == [f.name for f in dataclasses.fields(ContactSet)]
+    m = tiny_model()
+    partial = SimpleNamespace(slave=m.contacts.slave[:3], master=m.contacts.master[:3])
+    with ResultWriter(tmp_path / "r.h5", m, {}) as w:
+        with pytest.raises(ResultsError, match="frame 1 lack xi, area, law, blocks, gap0"):
+            w.write_frame(1, {"D": np.ones(3)}, contacts=partial)
 
 
 def test_no_contacts(tmp_path):
