@@ -39,6 +39,7 @@ from .kernels.config import plain
 from .kernels.contact_frame import quad_shape
 from .kernels.joint_law import JS_D, JS_DP1, JS_DP2
 from .kernels.plastic_damage import MP_LAM, MP_MU, MS_DC, MS_DT
+from .model import quad_normal
 
 #: coarse DOFs of a block (affine motion u = a + B (X - c)) and of a reference point (rigid)
 NB, NR = 12, 6
@@ -99,11 +100,7 @@ class BlockCoarse:
         c = sim.cont
         self.kc_el = np.array([lw.kc_pen for lw in laws])[c.law] if c.slave.size else np.zeros(0)
         self.kt_el = np.array([lw.kss for lw in laws])[c.law] if c.slave.size else np.zeros(0)
-        if c.slave.size:  # reference normals of the master faces
-            xq = X[c.master]
-            nrm = np.cross(xq[:, 1] + xq[:, 2] - xq[:, 0] - xq[:, 3],
-                           xq[:, 2] + xq[:, 3] - xq[:, 0] - xq[:, 1])
-            self.normal = nrm / np.linalg.norm(nrm, axis=1)[:, None]
+        self.normal = quad_normal(X[c.master])  # (nc, 3) reference normals of the master faces
         mesh = sim.mesh
         eb = np.asarray(m.element_block)
         self.volume = np.bincount(eb, mesh.wdet.sum(axis=1), minlength=m.n_blocks)  # (nb,) m^3
