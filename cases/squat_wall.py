@@ -24,9 +24,9 @@ its fracture energy; all of these), ``shear_damage=paper`` the literal eq. (7) o
 
 Run: ``python cases/squat_wall.py [key=value ...]`` (or ``dr-masonry run squat_wall``). The
 default, coarse monotonic run (one hexahedron per brick, 5260 nodes, 5036 contacts; 60 graded
-increments to 1 % drift: 30 put the peak 5.7 % low, BENCHMARKS.md section 11) took 4 min 22 s
-on 2 cores (2026-11-30, warm kernel cache; 64 increments, no cut, 2,394 iterations per
-increment, 255 s of relaxation; section 27);
+increments to 1 % drift: 30 put the peak 5.7 % low, BENCHMARKS.md section 11) took 2 min 58 s
+alone on 2 cores (2026-12-01, warm kernel cache; 64 increments, no cut, 2,737 iterations per
+increment, 172.9 s of relaxation; section 43);
 ``mesh=fine`` (4 x 1 x 2 hexahedra per brick, 20000 nodes) costs about 5 times more per iteration
 and is a long validation run.
 The energy balance error of these coarse increments reaches a few per cent (trapezoidal rule of

@@ -53,7 +53,7 @@ MODEL_ARRAYS = {
     "block_divisions": np.int64, "block_corners": np.float64, "block_material": np.int64,
     "block_fixed": np.bool_, "block_joint": np.int64,
 }
-#: contact-set arrays written to /model/contacts (``gap0`` only when the set has it)
+#: contact-set arrays written to /model/contacts and a frame's contacts: the fields of ContactSet
 CONTACT_ARRAYS = {
     "slave": np.int64, "master": np.int64, "xi": np.float64, "area": np.float64,
     "law": np.int64, "blocks": np.int64, "gap0": np.float64,

@@ -180,8 +180,8 @@ class SolverOptions:
     coarse : two-level relaxation: a Galerkin coarse correction on the blocks' affine motions
         (:mod:`dr_masonry.coarse`) before every span of ``coarse_every`` iterations; True, False
         or "auto" (default: on for models of at least ``COARSE_MIN_BLOCKS`` movable blocks, where
-        it saves 2-6 x the iterations before the peak; on a few blocks it only adds work,
-        BENCHMARKS.md)
+        it saves 2-4 x the iterations before the peak, BENCHMARKS.md section 6; on a few
+        blocks it only adds work)
     checkpoint_s : between frames, write the restart data again once this many seconds of wall
         time have passed since the last time (0: after every increment, and after each committed
         part of a cut increment), so that an interrupted long run loses at most about this much
