@@ -32,13 +32,14 @@ RUN_PARAMS = dict(
     max_iter=200_000,       # iteration cap of an increment before it is cut (SolverOptions)
     max_cuts=4,             # halvings of an increment before the run stops (SolverOptions)
     floor_tol=0.0,          # accept a stalled increment at this residual (SolverOptions; 0: off)
+    block_tol=0.0,          # every block balanced to this fraction of its forces (SolverOptions)
     frames=5,               # write a field frame every this many increments
     resume=False,           # continue the run stored in out.h5 from its last checkpoint
     resume_from=0,          # with resume: from the checkpoint kept after this increment instead
 )
 #: scene parameters that are :class:`SolverOptions` fields of the same name
 OPTION_KEYS = ("tol", "damping", "coarse", "max_dissipation", "redetect", "max_iter", "max_cuts",
-               "floor_tol")
+               "floor_tol", "block_tol")
 #: parameters that may differ when a run is continued: how it is solved and written, not what
 SOLVER_KEYS = {"resume", "resume_from", "progress", "out", "h5", "frames", "solver", *OPTION_KEYS}
 

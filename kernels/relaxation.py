@@ -95,7 +95,10 @@ I_KE_PREV = 20   # kinetic damping: kinetic energy of the last iteration (read a
 I_FIRE_DT = 21   # FIRE: step factor, mixing factor and steps since the last stop (read and
 I_FIRE_A = 22    # written: with I_KE_PREV the state a call that continues a span carries on)
 I_FIRE_N = 23
-N_INFO = 24
+I_BLOCK_TOL = 24  # largest block imbalance ratio accepted (set by the caller; 0: not a criterion)
+I_BLOCK = 25      # largest block imbalance ratio at exit (:func:`block_imbalance`)
+I_BLOCK_ID = 26   # the block that has it
+N_INFO = 27
 
 # kinds of place a guard names (info[I_KIND])
 WHERE_NODE = 0
@@ -287,6 +290,45 @@ def norms(dyn, lam, rpres):
     return np.sqrt(rf), np.sqrt(ref)
 
 
+@jit
+def block_imbalance(cont, dyn, lam, ratio):
+    """Imbalance ratio ``ratio`` (n_blocks,) of every block: |sum of the block's free residuals|
+    (N) over the sum of the magnitudes of the forces acting on it, its joints' (``cont.fbuf``
+    rows at its nodes) and its applied loads (N), the "local ratio" of block codes; returns (the
+    largest, its block). The global norm of :func:`norms` weighs every DOF against the whole
+    model's load, so a loose brick held by little more than its weight may stay out of balance by
+    tens of per cent of it (and creep) while the model counts as converged; this ratio sees it.
+    (Nodal internal forces would not do as the scale: element and joint forces cancel at an
+    unloaded node in balance.) A component counts only where every node of the block is free in
+    it (supported or tied components carry reactions); a block with no force has ratio 0."""
+    worst = 0.0
+    at = -1
+    for b in range(dyn.bstart.shape[0] - 1):
+        n0, n1, n2 = 0.0, 0.0, 0.0
+        a0, a1, a2 = 1.0, 1.0, 1.0
+        scale = 0.0
+        for i in range(dyn.bstart[b], dyn.bstart[b + 1]):
+            n0 += dyn.res[i, 0] * dyn.free[i, 0]
+            n1 += dyn.res[i, 1] * dyn.free[i, 1]
+            n2 += dyn.res[i, 2] * dyn.free[i, 2]
+            a0 = min(a0, dyn.free[i, 0])
+            a1 = min(a1, dyn.free[i, 1])
+            a2 = min(a2, dyn.free[i, 2])
+            f0 = dyn.fext[i, 0] + lam * dyn.P[i, 0]
+            f1 = dyn.fext[i, 1] + lam * dyn.P[i, 1]
+            f2 = dyn.fext[i, 2] + lam * dyn.P[i, 2]
+            scale += np.sqrt(f0 * f0 + f1 * f1 + f2 * f2)
+            for q in range(cont.ptr[i], cont.ptr[i + 1]):
+                r = cont.rows[q]
+                scale += np.sqrt(cont.fbuf[r, 0] ** 2 + cont.fbuf[r, 1] ** 2 + cont.fbuf[r, 2] ** 2)
+        ratio[b] = (np.sqrt((a0 * n0) ** 2 + (a1 * n1) ** 2 + (a2 * n2) ** 2) / scale
+                    if scale > 0.0 else 0.0)
+        if ratio[b] > worst:
+            worst = ratio[b]
+            at = b
+    return worst, at
+
+
 @ijit
 def update_chunk(lo, hi, fext, P, fint, res, free, V, U, minv, ring_count, lam, stale, scheme,
                  c_visc, alpha, ring, keep, c_mix, dt, part):
@@ -456,7 +498,10 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, ring, tol, ref
         (BENCHMARKS.md section 27).
     tol : float
         converged when ||r_free|| <= tol * max(reference, ref_floor) (``ref_floor``: N, the
-        smallest reference force that counts, for an unloaded model).
+        smallest reference force that counts, for an unloaded model) and, with
+        ``info[I_BLOCK_TOL]`` > 0, every block's imbalance ratio (:func:`block_imbalance`) is at
+        most ``info[I_BLOCK_TOL]``; the stall and rate tests below then follow the larger of the
+        residual ratio and the block ratio scaled by tol / ``info[I_BLOCK_TOL]``.
     max_iter : int
         iterations of this call at most (ST_MAXITER when they run out).
     check_every : int
@@ -526,6 +571,8 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, ring, tol, ref
     win_d = info[I_WIN_D]
     win_k = info[I_WIN_K]
     last_check = seg
+    block_tol = info[I_BLOCK_TOL]
+    bratio = np.empty(dyn.bstart.shape[0] - 1)
     if seg == 0:
         dyn.ring[:] = 0.0
     hbuf = mesh.fbuf.reshape((-1, 3))
@@ -558,10 +605,15 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, ring, tol, ref
                 status = ST_NONFINITE
                 qty, kind, worst = worst_place(dyn, lam)
                 break
-            if rn <= tol * max(ref, ref_floor) and its > 1:
+            done = rn <= tol * max(ref, ref_floor)
+            ratio = rn / max(ref, ref_floor)
+            if block_tol > 0.0:   # the blocks' balance too, scaled onto the ratio's tol
+                rb = tol * block_imbalance(cont, dyn, lam, bratio)[0] / block_tol
+                done = done and rb <= tol
+                ratio = max(ratio, rb)
+            if done and its > 1:
                 status = ST_CONVERGED
                 break
-            ratio = rn / max(ref, ref_floor)
             if ratio <= goal or goal <= 0.0:
                 goal = STALL_DROP * ratio
                 since = 0.0
@@ -734,6 +786,8 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, ring, tol, ref
     info[I_ITERS] = it
     info[I_STATUS] = status
     info[I_RESID] = rn / max(ref, ref_floor)
+    if it > 0:
+        info[I_BLOCK], info[I_BLOCK_ID] = block_imbalance(cont, dyn, lam, bratio)
     info[I_KE] = ke
     info[I_DAMPED] = damped
     info[I_GOAL] = goal

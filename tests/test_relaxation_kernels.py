@@ -4,6 +4,8 @@ against a direct sparse solve, the kinetic and local (Cundall) damping iteration
 numpy iterations step by step, ``norms``, ``worst_place`` and ``stored_energy`` against
 hand values (and 0.5 u.K u), ``rotation_matrix`` against scipy's rotation vectors,
 ``place_rigid_nodes`` and ``rp_residual`` against numpy (the latter through virtual work)."""
+from collections import namedtuple
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -190,7 +192,8 @@ def _dyn(n, nr, n_tied):
                np.full(n, -1, np.int64), z.copy(), z.copy(), z.copy(), z.copy(),
                np.zeros((nr, 3)), np.zeros((nr, 6)), np.zeros((nr, 6)), np.ones((nr, 6)),
                np.ones((nr, 6)), np.zeros((nr, 6)), np.zeros((nr, 6)),
-               np.zeros(nr + 1, np.int64), np.zeros(n_tied, np.int64), np.ones(nr), z.copy())
+               np.zeros(nr + 1, np.int64), np.zeros(n_tied, np.int64), np.ones(nr), z.copy(),
+               np.array([0, n], np.int64))
 
 
 def test_norms_hand_values():
@@ -219,6 +222,31 @@ def test_norms_hand_values():
     rf, ref = R.norms(d, 2.0, rpres)
     assert rf == pytest.approx(np.sqrt(28.0), rel=1e-15)
     assert ref == pytest.approx(np.sqrt(43.0), rel=1e-15)
+
+
+def test_block_imbalance_hand_values():
+    """Blocks {0, 1}, {2}, {3}: block 0 free in x and y on both nodes, node 1 supported in z (z
+    drops out of its net force); block 1 all free; block 2 supported (nothing counts, ratio 0).
+    The scale is the joints' forces at the block's nodes (contact rows 0 at node 0, 1 at node 2,
+    2 at node 3) and its loads; the nodal internal forces (which cancel at a node in balance)
+    do not count.
+
+    lam 1: loads fext + P = [0,0,-3], [0,4,0], [0,0,0], [1,0,0]. Block 0: net residual
+    [1+2, 2-2] = [3, 0] (z: 5 + 9 not counted), joints 5, loads 3 + 4: 3 / 12. Block 1: net
+    |[0, 6, 8]| = 10, joints 12, no load: 10 / 12. Block 2: 0."""
+    d = _dyn(4, 0, 0)._replace(bstart=np.array([0, 2, 3, 4], np.int64))
+    d.fext[:] = [[0, 0, -3], [0, 2, 0], [0, 0, 0], [1, 0, 0]]
+    d.P[:] = [[0, 0, 0], [0, 2, 0], [0, 0, 0], [0, 0, 0]]
+    d.fint[:] = 1e9
+    d.res[:] = [[1, 2, 5], [2, -2, 9], [0, 6, 8], [4, 4, 4]]
+    d.free[:] = [[1, 1, 1], [1, 1, 0], [1, 1, 1], [0, 0, 0]]
+    joints = namedtuple("Joints", "fbuf ptr rows")(
+        np.array([[3.0, 0, 4], [0, 12, 0], [0, 0, 7]]), np.array([0, 1, 1, 2, 3]),
+        np.array([0, 1, 2]))
+    ratio = np.full(3, np.nan)
+    worst, at = R.block_imbalance(joints, d, 1.0, ratio)
+    np.testing.assert_allclose(ratio, [3 / 12, 10 / 12, 0.0], rtol=1e-15)
+    assert (worst, at) == (pytest.approx(10 / 12, rel=1e-15), 1)
 
 
 def test_worst_place_hand_values():
