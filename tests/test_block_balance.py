@@ -66,7 +66,7 @@ def test_block_tol_is_validated(value):
 
 
 def test_block_tol_is_a_scene_parameter():
-    assert RUN_PARAMS["block_tol"] == 0.0
+    assert RUN_PARAMS["block_tol"] == SolverOptions().block_tol == 0.1
 
 
 def test_a_block_far_out_of_balance_is_named_once(tmp_path):
