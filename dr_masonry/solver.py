@@ -70,8 +70,8 @@ OVERHANG_WARN = 0.05
 #: the predictor does not continue the motion of a block that an accepted increment leaves out of
 #: balance by more than this fraction of the forces on it (``kernels.relaxation.block_imbalance``)
 LOOSE_BLOCK = 0.1
-#: warn (once per run) beyond this imbalance of a block (SolverOptions.block_tol); a lightly
-#: loaded brick of a cracked wall often ends a converged increment at 0.1-0.45 (S5 main job)
+#: warn (once per run) beyond this imbalance of a block: with SolverOptions.block_tol a converged
+#: increment leaves none above block_tol, so only a row accepted at the residual floor can
 BLOCK_IMBALANCE_WARN = 0.5
 #: load-step control: a half step that dissipates this fraction of its whole step's dissipation
 #: or more holds a jump (smooth softening gives about one half) and is not cut again
@@ -171,12 +171,13 @@ class SolverOptions:
         block_imbalance``: the net out-of-balance force of the block over the sum of the
         magnitudes of its joints' forces and loads, the "local ratio" of block codes) to be at
         most this for an increment to converge (default 0.1; 0: off, only the global ratio
-        ``tol`` counts; the S5 main job's largest ratio is 0.084, so it never binds there). The global norm weighs a loose brick's imbalance against the whole model's load,
-        so a brick held by little more than its weight can stay tens of per cent out of balance
-        and creep (continued by the predictor before it left such blocks alone, ``LOOSE_BLOCK``,
-        bricks left the S5 wall's plane over a few rows of a cyclic run: docs/validation.md);
-        the history column ``block_imbalance`` records every row's largest ratio, and a run
-        warns once when it passes ``BLOCK_IMBALANCE_WARN``
+        ``tol`` counts; the S5 main job's largest ratio is 0.084, so it never binds there). The
+        global norm weighs a loose brick's imbalance against the whole model's load, so a brick
+        held by little more than its weight can stay tens of per cent out of balance and creep
+        (continued by the predictor before it left such blocks alone, ``LOOSE_BLOCK``, bricks
+        left the S5 wall's plane over a few rows of a cyclic run: docs/validation.md); the
+        history column ``block_imbalance`` records every row's largest ratio, and a run warns
+        once when it passes ``BLOCK_IMBALANCE_WARN``
     max_dissipation : load-step control, off by default (0): a converged increment whose damage
         dissipation (blocks, and joints without friction) exceeds this fraction of the external
         work done so far is cut in two (accepted at the last allowed cut). Where many joints
