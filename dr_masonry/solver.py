@@ -41,9 +41,10 @@ Energies = namedtuple("Energies", "stored f_tot dw ratio diss element_diss joint
 #: fint internal forces N, res out-of-balance N; reference points (n_rp, 6) rpU/rpV/rpminv/rpfree,
 #: rpf applied and rpP pattern generalised forces, rpX (n_rp, 3) m, rpptr/rpnodes CSR of tied
 #: nodes, rpradius (n_rp,) m radius of gyration (moment scale); ring (n_nodes, 3) velocity-reversal
-#: counts of the ring damping (``R.relax``); bstart (n_blocks + 1,) first node of each block
+#: counts of the ring damping (``R.relax``); bstart (n_blocks + 1,) first node of each block,
+#: bratio (n_blocks,) each block's imbalance ratio at the end of the last relaxation
 Dyn = namedtuple("Dyn", "X U V minv free tied fext P fint res rpX rpU rpV rpminv rpfree rpf rpP "
-                        "rpptr rpnodes rpradius ring bstart")
+                        "rpptr rpnodes rpradius ring bstart bratio")
 
 DAMPING = {"kinetic": R.DAMP_KINETIC, "viscous": R.DAMP_VISCOUS, "local": R.DAMP_LOCAL,
            "fire": R.DAMP_FIRE}
@@ -519,7 +520,8 @@ class Simulation:
         self.dyn = Dyn(X, z.copy(), z.copy(), minv, free, tied, z.copy(), z.copy(), z.copy(),
                        z.copy(), rpX, np.zeros((nr, 6)), np.zeros((nr, 6)), rpminv,
                        np.ones((nr, 6)), np.zeros((nr, 6)), np.zeros((nr, 6)), rpptr, rpnodes,
-                       rpradius, z.copy(), np.ascontiguousarray(m.block_node_start, np.int64))
+                       rpradius, z.copy(), np.ascontiguousarray(m.block_node_start, np.int64),
+                       np.zeros(m.n_blocks))
         from .sliding import Sliding
         self.sliding = Sliding(self) if (o.redetect and nc) else None
         movable = int((~m.block_fixed).sum())
@@ -1223,12 +1225,11 @@ class Simulation:
         DOFs, for the next increment's predictor; zero on the blocks still out of balance by more
         than ``LOOSE_BLOCK``: they moved because they are loose, not because the load
         moved them (continued row after row, S5 cyclic carried bricks out of the wall's plane a
-        few mm per row: docs/validation.md)."""
+        few mm per row: docs/validation.md). The ratios are those ``R.relax`` left in
+        ``dyn.bratio`` for the accepted state."""
         d = self.dyn
-        ratios = np.empty(self.model.n_blocks)
-        R.block_imbalance(self.cont, d, self.lam[0], ratios)
         du = (d.U - u_before) * d.free
-        du[np.repeat(ratios > LOOSE_BLOCK, np.diff(d.bstart))] = 0.0
+        du[np.repeat(d.bratio > LOOSE_BLOCK, np.diff(d.bstart))] = 0.0
         return du
 
     def _check_balance(self, info):

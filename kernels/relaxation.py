@@ -96,7 +96,8 @@ I_FIRE_DT = 21   # FIRE: step factor, mixing factor and steps since the last sto
 I_FIRE_A = 22    # written: with I_KE_PREV the state a call that continues a span carries on)
 I_FIRE_N = 23
 I_BLOCK_TOL = 24  # largest block imbalance ratio accepted (set by the caller; 0: not a criterion)
-I_BLOCK = 25      # largest block imbalance ratio at exit (:func:`block_imbalance`)
+I_BLOCK = 25      # largest block imbalance ratio at exit (:func:`block_imbalance`; every
+                  # block's in ``dyn.bratio``)
 I_BLOCK_ID = 26   # the block that has it
 N_INFO = 27
 
@@ -572,7 +573,6 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, ring, tol, ref
     win_k = info[I_WIN_K]
     last_check = seg
     block_tol = info[I_BLOCK_TOL]
-    bratio = np.empty(dyn.bstart.shape[0] - 1)
     if seg == 0:
         dyn.ring[:] = 0.0
     hbuf = mesh.fbuf.reshape((-1, 3))
@@ -608,7 +608,7 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, ring, tol, ref
             done = rn <= tol * max(ref, ref_floor)
             ratio = rn / max(ref, ref_floor)
             if block_tol > 0.0:   # the blocks' balance too, scaled onto the ratio's tol
-                rb = tol * block_imbalance(cont, dyn, lam, bratio)[0] / block_tol
+                rb = tol * block_imbalance(cont, dyn, lam, dyn.bratio)[0] / block_tol
                 done = done and rb <= tol
                 ratio = max(ratio, rb)
             if done and its > 1:
@@ -787,7 +787,7 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, ring, tol, ref
     info[I_STATUS] = status
     info[I_RESID] = rn / max(ref, ref_floor)
     if it > 0:
-        info[I_BLOCK], info[I_BLOCK_ID] = block_imbalance(cont, dyn, lam, bratio)
+        info[I_BLOCK], info[I_BLOCK_ID] = block_imbalance(cont, dyn, lam, dyn.bratio)
     info[I_KE] = ke
     info[I_DAMPED] = damped
     info[I_GOAL] = goal

@@ -193,7 +193,7 @@ def _dyn(n, nr, n_tied):
                np.zeros((nr, 3)), np.zeros((nr, 6)), np.zeros((nr, 6)), np.ones((nr, 6)),
                np.ones((nr, 6)), np.zeros((nr, 6)), np.zeros((nr, 6)),
                np.zeros(nr + 1, np.int64), np.zeros(n_tied, np.int64), np.ones(nr), z.copy(),
-               np.array([0, n], np.int64))
+               np.array([0, n], np.int64), np.zeros(1))
 
 
 def test_norms_hand_values():
