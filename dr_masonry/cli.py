@@ -98,6 +98,8 @@ def _cmd_info(args):
                  or "same parameters"))
     print(f"history:   {r.n_history} rows, columns {list(r.history)}")
     print(_above_tol(r))
+    for line in _checks(r):
+        print(line)
     ids = r.frame_ids
     print(f"frames:    {r.n_frames}" + (f" (increments {ids[0]} .. {ids[-1]})" if ids else ""))
     try:
@@ -159,6 +161,46 @@ def _above_tol(r):
     shown = ", ".join(str(i) for i in rows[:12]) + (", ..." if rows.size > 12 else "")
     return (f"residual:  {rows.size} of {len(res)} rows accepted above tol {tol:g} (floor_tol; "
             f"largest ratio {np.max(res):.3g}): rows {shown}")
+
+
+def _largest(r, column):
+    """(largest |value|, its row) of a history column, NaN rows (not recorded) left out; None
+    where the column is missing or holds no value."""
+    v = np.abs(np.asarray(r.history.get(column, []), dtype=float))
+    if not np.isfinite(v).any():
+        return None
+    i = int(np.nanargmax(v))
+    return float(v[i]), i
+
+
+def _checks(r):
+    """Lines on what a reader should trust the run's rows for: the energy balance, every block's
+    balance (``SolverOptions.block_tol``) and how far joint nodes slid off their faces."""
+    solver = r.config.get("solver") or {}
+    lines = []
+    e = _largest(r, "balance_error")
+    if e is not None:
+        etol = solver.get("energy_tol")
+        n = "" if etol is None else (
+            f"; {int(np.sum(np.abs(r.history['balance_error']) > etol))} rows above energy_tol "
+            f"{etol:g}")
+        lines.append(f"energy:    balance error at most {e[0]:.3g} of the gross work (row "
+                     f"{e[1]}){n}")
+    b = _largest(r, "block_imbalance")
+    if b is not None:
+        btol = solver.get("block_tol")
+        n = "" if not btol else (
+            f"; {int(np.sum(np.asarray(r.history['block_imbalance']) > btol))} rows above "
+            f"block_tol {btol:g}")
+        lines.append(f"blocks:    largest block imbalance ratio {b[0]:.3g} (row {b[1]}){n}")
+    elif r.n_history:
+        lines.append("blocks:    no block_imbalance column (written before 2026-12-02: loose "
+                     "blocks were not checked; docs/validation.md, S5 cyclic)")
+    o = _largest(r, "max_overhang")
+    if o is not None:
+        lines.append(f"overhang:  joint nodes slid at most {o[0] * 1e3:.3g} mm off their master "
+                     f"faces (row {o[1]})")
+    return lines
 
 
 def _cmd_list(args):

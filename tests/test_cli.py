@@ -4,6 +4,7 @@ import subprocess
 import sys
 import types
 
+import numpy as np
 import pytest
 
 from dr_masonry import cli
@@ -155,6 +156,33 @@ def test_info_restarts_and_rows_above_tol(tmp_path, capsys):
     # solver.max_iter and solver.floor_tol say what max_iter and floor_tol say
     assert lines[0].endswith(": max_iter 200 -> 50, floor_tol 0.0 -> 0.001")
     assert lines[1].endswith(": same parameters")
+
+
+def test_info_checks(tmp_path, capsys):
+    """info names the largest energy-balance error, block imbalance (rows before the column
+    existed are NaN) and overhang with their rows, and counts the rows above the run's limits."""
+    from test_results import tiny_model
+    from dr_masonry.results import ResultWriter
+    p = tmp_path / "r.h5"
+    cfg = {"solver": {"tol": 1e-4, "energy_tol": 0.01, "block_tol": 0.1}}
+    rows = [(0.02, np.nan, 1e-3), (-0.03, 0.05, 4e-3), (0.001, 0.25, 2e-3), (0.0, 0.12, 0.0)]
+    with ResultWriter(p, tiny_model(), cfg) as w:
+        for i, (e, b, o) in enumerate(rows):
+            w.append_history({"increment": i, "residual": 1e-5, "balance_error": e,
+                              "block_imbalance": b, "max_overhang": o})
+    assert main(["info", str(p)]) == 0
+    out = capsys.readouterr().out
+    assert "energy:    balance error at most 0.03 of the gross work (row 1); 2 rows above " \
+           "energy_tol 0.01" in out
+    assert "blocks:    largest block imbalance ratio 0.25 (row 2); 2 rows above block_tol 0.1" in out
+    assert "overhang:  joint nodes slid at most 4 mm off their master faces (row 1)" in out
+    q = tmp_path / "old.h5"
+    with ResultWriter(q, tiny_model(), cfg) as w:
+        w.append_history({"increment": 0, "residual": 1e-5})
+    assert main(["info", str(q)]) == 0
+    out = capsys.readouterr().out
+    assert "blocks:    no block_imbalance column" in out
+    assert "energy:" not in out and "overhang:" not in out
 
 
 def test_vtk_command(tmp_path, capsys):
