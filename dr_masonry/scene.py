@@ -36,12 +36,15 @@ RUN_PARAMS = dict(
     frames=5,               # write a field frame every this many increments
     resume=False,           # continue the run stored in out.h5 from its last checkpoint
     resume_from=0,          # with resume: from the checkpoint kept after this increment instead
+    replot=False,           # write the outputs (curve, CSV, VTK) of the run stored in out.h5, as
+                            # far as it went (a stopped run, or one still writing), without running
 )
 #: scene parameters that are :class:`SolverOptions` fields of the same name
 OPTION_KEYS = ("tol", "damping", "coarse", "max_dissipation", "redetect", "max_iter", "max_cuts",
                "floor_tol", "block_tol")
 #: parameters that may differ when a run is continued: how it is solved and written, not what
-SOLVER_KEYS = {"resume", "resume_from", "progress", "out", "h5", "frames", "solver", *OPTION_KEYS}
+SOLVER_KEYS = {"resume", "resume_from", "replot", "progress", "out", "h5", "frames", "solver",
+               *OPTION_KEYS}
 
 
 def choice(params, key, options):
@@ -67,44 +70,62 @@ def with_penalty(law, factor):
     return law.with_changes(kc_pen=factor * law.knn)
 
 
+def _stored_run(params, key):
+    """The :class:`~dr_masonry.results.Result` of ``params["h5"]`` for ``key``=true (``resume``
+    or ``replot``), checked to exist and to have been run with ``params`` apart from
+    :data:`SOLVER_KEYS`."""
+    from .results import open_result
+    path = params["h5"]
+    if not os.path.exists(path):
+        raise ParameterError(f"parameter {key}=true: no result file {path} to "
+                             + ("continue" if key == "resume" else "draw"))
+    result = open_result(path)
+    stored = result.config
+    changed = sorted(k for k in set(stored) & set(params) - SOLVER_KEYS if stored[k] != params[k])
+    if changed:
+        raise ParameterError(f"parameter {key}=true: {path} was run with "
+                             + ", ".join(f"{k}={stored[k]!r}" for k in changed)
+                             + "; give the same parameters")
+    return result
+
+
 def run_stages(sim, stages, params):
     """``sim.run(stages)``; with ``params["resume"]``, continue ``params["h5"]`` from its last
     checkpoint instead, or from the one kept after increment ``params["resume_from"]`` (when
-    not 0; ``dr-masonry info`` lists them); the stored run's parameters must equal ``params``
-    apart from :data:`SOLVER_KEYS`. A Ctrl-C or SIGTERM (KeyboardInterrupt,
-    :class:`~dr_masonry.interrupts.Terminated`) goes on up with a note saying where the rows so
-    far are and how to continue (``dr-masonry`` and the case scripts print just that note); a
-    :class:`~dr_masonry.solver.SolverError` gets a note naming the file of the rows so far."""
+    not 0; ``dr-masonry info`` lists them); with ``params["replot"]``, run nothing and return
+    the stored history as far as it goes (``sim.history`` set to it, for :func:`finish`). The
+    stored run's parameters must equal ``params`` apart from :data:`SOLVER_KEYS`. A Ctrl-C or
+    SIGTERM (KeyboardInterrupt, :class:`~dr_masonry.interrupts.Terminated`) goes on up with a
+    note saying where the rows so far are and how to continue (``dr-masonry`` and the case
+    scripts print just that note); a :class:`~dr_masonry.solver.SolverError` gets a note naming
+    the file of the rows so far."""
     if params.get("resume_from") and not params.get("resume"):
         raise ParameterError(f"parameter resume_from={params['resume_from']!r} continues a stored "
                              f"run: add resume=true (without it the run starts again and "
                              f"overwrites {params.get('h5')})")
+    if params.get("replot"):
+        if params.get("resume"):
+            raise ParameterError("parameters replot=true and resume=true: replot draws the stored "
+                                 "run without running, resume continues it; give one")
+        sim.history = {k: np.asarray(v) for k, v in _stored_run(params, "replot").history.items()}
+        sim.output = params["h5"]
+        return dict(sim.history)
     if params.get("resume"):
-        from .results import open_result
         path = params["h5"]
-        if not os.path.exists(path):
-            raise ParameterError(f"parameter resume=true: no result file {path} to continue")
-        result = open_result(path)
+        result = _stored_run(params, "resume")
         if result.complete and not params.get("resume_from"):
             raise ParameterError(f"parameter resume=true: {path} is complete "
                                  f"({len(result.history.get('increment', ()))} rows, the end of "
                                  f"its last stage): nothing to continue (resume_from=INCREMENT "
                                  f"goes on from a kept checkpoint; `dr-masonry info` lists them)")
-        stored = result.config
-        changed = sorted(k for k in set(stored) & set(params) - SOLVER_KEYS
-                         if stored[k] != params[k])
-        if changed:
-            raise ParameterError(f"parameter resume=true: {path} was run with "
-                                 + ", ".join(f"{k}={stored[k]!r}" for k in changed)
-                                 + "; continue it with the same parameters")
         sim.resume(path, params.get("resume_from") or None)
     try:
         return sim.run(stages)
     except KeyboardInterrupt as e:
         h5 = params.get("h5")
         e.add_note(f"interrupted in row {sim.increment + 1}" + (
-            f": the rows so far are in {h5}; add resume=true to the same command to continue"
-            if h5 else ""))
+            f": the rows so far are in {h5}; add resume=true to the same command to continue, "
+            f"or replot=true to write their curve, CSV and VTK" if h5 else ""))
         raise
     except SolverError as e:
         if params.get("h5"):

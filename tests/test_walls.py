@@ -294,6 +294,37 @@ def test_interrupted_run_resumes(tmp_path, monkeypatch, squat):
     assert open_result(params["h5"]).n_history == whole["increment"].size
 
 
+def test_replot_draws_a_stopped_run_without_running(tmp_path, monkeypatch):
+    """``replot=true`` writes the curve, CSV (the stored rows) and VTK of a run stopped part way,
+    runs nothing, and leaves the file as it was; it refuses resume=true, changed parameters and
+    a missing file, naming them."""
+    from dr_masonry.solver import Simulation
+    out = tmp_path / "s5"
+    argv = ["fast=true", "increments=6", "drift=0.03", f"out={out}", "frames=2"]
+    interrupt_after(monkeypatch, 5)
+    with pytest.raises(KeyboardInterrupt) as e:
+        squat_wall.main(argv)
+    assert any("replot=true" in n for n in e.value.__notes__)
+    assert not (tmp_path / "s5.csv").exists()
+    monkeypatch.setattr(Simulation, "run", lambda *a: pytest.fail("replot ran the solver"))
+    squat_wall.main(argv + ["replot=true"])
+    r = open_result(str(out) + ".h5")
+    assert r.n_history == 5
+    csv = np.genfromtxt(str(out) + ".csv", delimiter=",", names=True)
+    for key in ("increment", "beam.ux", "beam.fx"):
+        np.testing.assert_array_equal(csv[key.replace(".", "")], r.history[key])
+    assert os.path.getsize(str(out) + ".png") > 0
+    vtu = sorted(p.name for p in (tmp_path / "s5_vtk").glob("blocks_*.vtu"))
+    assert vtu == [f"blocks_{i:06d}.vtu" for i in r.frame_ids] and len(vtu) >= 2
+    assert open_result(str(out) + ".h5").n_history == 5   # untouched
+    with pytest.raises(ParameterError, match="replot=true and resume=true"):
+        squat_wall.main(argv + ["replot=true", "resume=true"])
+    with pytest.raises(ParameterError, match=r"replot=true: .*s5\.h5 was run with drift=0\.03"):
+        squat_wall.main(argv[:2] + ["drift=0.02"] + argv[3:] + ["replot=true"])
+    with pytest.raises(ParameterError, match=r"replot=true: no result file .*none\.h5"):
+        squat_wall.main(argv[:3] + [f"out={tmp_path / 'none'}", "replot=true"])
+
+
 def test_checkpoint_between_frames(tmp_path, monkeypatch):
     """With checkpoint_s = 0 the restart data follow every increment even when frames are
     sparse: an interrupted run loses no row and resumes from an increment without a frame."""
