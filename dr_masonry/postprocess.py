@@ -68,7 +68,8 @@ def energy_per_cycle(history, key, rows=None, force=None):
     list of dict
         per cycle: ``cycle`` (1-based), ``amplitude`` (max |u|, m), ``D_blocks``, ``D_joints``
         and ``D_total`` (J dissipated during the cycle), ``W_ext`` (J, net external work of
-        the cycle). With ``force``: ``u_max``, ``u_min`` (m, extreme displacements), ``F_max``,
+        the cycle), ``complete`` (False for a last cycle that has not gone both ways and back
+        to zero: a run stopped inside it). With ``force``: ``u_max``, ``u_min`` (m, extreme displacements), ``F_max``,
         ``F_min`` (largest and smallest force of the cycle, the column's unit) and ``xi_eq``,
         the equivalent viscous damping ratio ``D_total / (pi (|F(u_max) u_max| + |F(u_min)
         u_min|))`` (Jacobsen's ``E_D / (4 pi E_so)`` with the strain energy ``E_so`` of each
@@ -114,8 +115,12 @@ def energy_per_cycle(history, key, rows=None, force=None):
     f = np.asarray(history[force])[sel] if force is not None else None
     before = {k: (np.asarray(history[k])[first - 1] if first > 0 else 0.0) for k in cum}
     out = []
-    for i, (a, b) in enumerate(cycle_bounds(u)):
-        row = {"cycle": i + 1, "amplitude": float(np.abs(u[a:b]).max())}
+    bounds = cycle_bounds(u)
+    moved = u[u != 0.0]
+    v = u * (np.sign(moved[0]) if moved.size else 1.0)   # the protocol's first move positive
+    for i, (a, b) in enumerate(bounds):
+        row = {"cycle": i + 1, "amplitude": float(np.abs(u[a:b]).max()),
+               "complete": bool(i < len(bounds) - 1 or (v[a:b].min() < 0.0 and v[b - 1] >= 0.0))}
         for k, v in cum.items():
             start = v[a - 1] if a > 0 else before[k]
             row[k] = float(v[b - 1] - start)
@@ -133,7 +138,8 @@ def energy_per_cycle(history, key, rows=None, force=None):
 def cycle_text(cycles, u_unit=1e-3, f_unit=1e3):
     """Per-cycle table of :func:`energy_per_cycle` as text lines: displacements in ``u_unit`` m
     (default mm), forces in ``f_unit`` (default kN), energies J. Cycles without ``force`` give
-    the amplitude instead of the peaks, forces and xi_eq."""
+    the amplitude instead of the peaks, forces and xi_eq; a cycle a run stopped inside
+    (``complete`` False) is marked ``(partial)``."""
     for name, v in (("u_unit", u_unit), ("f_unit", f_unit)):
         if not (is_number(v) and v > 0):
             raise PostprocessError(f"cycle_text: {name}={v!r} must be a finite number > 0")
@@ -146,13 +152,15 @@ def cycle_text(cycles, u_unit=1e-3, f_unit=1e3):
         if missing:
             raise PostprocessError(f"cycle_text: cycle {i} lacks {missing}; give the list "
                                    "energy_per_cycle returns")
+    def partial(c):
+        return "" if c.get("complete", True) else " (partial)"
     if not peaks:
         return "\n".join(["cycle  amplitude  dissipated (joints / blocks) J"] + [
             f"{c['cycle']:5d} {c['amplitude'] / u_unit:10.2f}  {c['D_total']:10.2f} "
-            f"({c['D_joints']:.2f} / {c['D_blocks']:.2f})" for c in cycles])
+            f"({c['D_joints']:.2f} / {c['D_blocks']:.2f}){partial(c)}" for c in cycles])
     lines = ["cycle  u_max  u_min   F_max   F_min  dissipated (joints / blocks) J  xi_eq"]
     for c in cycles:
         lines.append(f"{c['cycle']:5d} {c['u_max'] / u_unit:6.2f} {c['u_min'] / u_unit:6.2f} "
                      f"{c['F_max'] / f_unit:7.2f} {c['F_min'] / f_unit:7.2f}  {c['D_total']:10.2f} "
-                     f"({c['D_joints']:.2f} / {c['D_blocks']:.2f})   {c['xi_eq']:.3f}")
+                     f"({c['D_joints']:.2f} / {c['D_blocks']:.2f})   {c['xi_eq']:.3f}{partial(c)}")
     return "\n".join(lines)

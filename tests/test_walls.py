@@ -192,6 +192,11 @@ def test_equivalent_damping_by_hand(tmp_path):
     assert c["xi_eq"] == pytest.approx(8.0 / (math.pi * 58.0), rel=1e-12)
     assert (c["u_max"], c["u_min"], c["F_max"], c["F_min"]) == (2e-3, -2e-3, 16e3, -14e3)
     assert "0.044" in cycle_text([c]).splitlines()[1]
+    assert c["complete"] and "partial" not in cycle_text([c])
+    # a run stopped inside its cycle (at -1 mm on the way back, or before it went negative)
+    for stop in (8, 5):
+        (p,) = energy_per_cycle({k: v[:stop] for k, v in h.items()}, "u", force="F")
+        assert not p["complete"] and cycle_text([p]).endswith(" (partial)")
     still = dict(h, u=np.zeros(9))
     assert math.isnan(energy_per_cycle(still, "u", force="F")[0]["xi_eq"])
     with pytest.raises(PostprocessError, match="'G'"):
