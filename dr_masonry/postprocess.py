@@ -117,10 +117,11 @@ def energy_per_cycle(history, key, rows=None, force=None):
     out = []
     bounds = cycle_bounds(u)
     moved = u[u != 0.0]
-    v = u * (np.sign(moved[0]) if moved.size else 1.0)   # the protocol's first move positive
+    signed = u * (np.sign(moved[0]) if moved.size else 1.0)   # the protocol's first move positive
     for i, (a, b) in enumerate(bounds):
         row = {"cycle": i + 1, "amplitude": float(np.abs(u[a:b]).max()),
-               "complete": bool(i < len(bounds) - 1 or (v[a:b].min() < 0.0 and v[b - 1] >= 0.0))}
+               "complete": bool(i < len(bounds) - 1 or (signed[a:b].min() < 0.0
+                                                              and signed[b - 1] >= 0.0))}
         for k, v in cum.items():
             start = v[a - 1] if a > 0 else before[k]
             row[k] = float(v[b - 1] - start)

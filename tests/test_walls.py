@@ -197,6 +197,8 @@ def test_equivalent_damping_by_hand(tmp_path):
     for stop in (8, 5):
         (p,) = energy_per_cycle({k: v[:stop] for k, v in h.items()}, "u", force="F")
         assert not p["complete"] and cycle_text([p]).endswith(" (partial)")
+    two = {k: np.r_[v, v[1:] + (v[-1] if k.startswith(("D_", "W_")) else 0.0)] for k, v in h.items()}
+    assert [c["complete"] for c in energy_per_cycle(two, "u", force="F")] == [True, True]
     still = dict(h, u=np.zeros(9))
     assert math.isnan(energy_per_cycle(still, "u", force="F")[0]["xi_eq"])
     with pytest.raises(PostprocessError, match="'G'"):
