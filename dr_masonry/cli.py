@@ -96,7 +96,8 @@ def _cmd_info(args):
         print(f"restart {k}: {rs.get('time', '?')}, dr_masonry {rs.get('code_version', '?')}: "
               + (", ".join(f"{key} {old!r} -> {new!r}" for key, (old, new) in changed.items())
                  or "same parameters"))
-    print(f"history:   {r.n_history} rows, columns {list(r.history)}")
+    print(f"history:   {r.n_history} rows (numbered from 1 below, as in the run's messages), "
+          f"columns {list(r.history)}")
     print(_above_tol(r))
     for line in _checks(r):
         print(line)
@@ -120,7 +121,7 @@ def _cmd_info(args):
         for k in args.peak or r.history:
             v = r.history[k]
             i, j = int(np.argmax(v)), int(np.argmin(v))
-            print(f"peak {k}: max {v[i]:.6g} (row {i}), min {v[j]:.6g} (row {j})")
+            print(f"peak {k}: max {v[i]:.6g} (row {i + 1}), min {v[j]:.6g} (row {j + 1})")
     return 0
 
 
@@ -158,19 +159,19 @@ def _above_tol(r):
         return "residual:  (no solver tolerance or residual column recorded)"
     if not rows.size:
         return f"residual:  every row converged to tol {tol:g}"
-    shown = ", ".join(str(i) for i in rows[:12]) + (", ..." if rows.size > 12 else "")
+    shown = ", ".join(str(i + 1) for i in rows[:12]) + (", ..." if rows.size > 12 else "")
     return (f"residual:  {rows.size} of {len(res)} rows accepted above tol {tol:g} (floor_tol; "
             f"largest ratio {np.max(res):.3g}): rows {shown}")
 
 
 def _largest(r, column):
-    """(largest |value|, its row) of a history column, NaN rows (not recorded) left out; None
-    where the column is missing or holds no value."""
+    """(largest |value|, its row counted from 1) of a history column, NaN rows (not recorded)
+    left out; None where the column is missing or holds no value."""
     v = np.abs(np.asarray(r.history.get(column, []), dtype=float))
     if not np.isfinite(v).any():
         return None
     i = int(np.nanargmax(v))
-    return float(v[i]), i
+    return float(v[i]), i + 1
 
 
 def _checks(r):

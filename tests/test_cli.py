@@ -96,12 +96,13 @@ def test_info(tmp_path, capsys):
     assert main(["info", str(p), "--peak", "force"]) == 0
     out = capsys.readouterr().out
     assert "2 blocks, 4 hexahedra, 24 nodes, 6 contact points" in out
-    assert "history:   5 rows, columns ['increment', 'disp', 'force']" in out
+    assert "history:   5 rows (numbered from 1 below, as in the run's messages), columns " \
+           "['increment', 'disp', 'force']" in out
     assert "frames:    3 (increments 0 .. 4)" in out
     assert "checkpoint: none" in out
     assert "last row:  increment=4, disp=0.0004, force=-756.802" in out
-    # 1e3 sin(i), i = 0..4: max at i = 2, min at i = 4
-    assert "peak force: max 909.297 (row 2), min -756.802 (row 4)" in out
+    # 1e3 sin(i), i = 0..4: max at i = 2, min at i = 4 (rows 3 and 5, counted from 1)
+    assert "peak force: max 909.297 (row 3), min -756.802 (row 5)" in out
     assert '"drift": 0.01' in out
     assert main(["info", str(p), "--peak", "drift"]) == 2
     assert "no history column ['drift']" in capsys.readouterr().err
@@ -142,7 +143,7 @@ def test_info_restarts_and_rows_above_tol(tmp_path, capsys):
     assert main(["info", str(p)]) == 0
     out = capsys.readouterr().out
     assert "residual:  1 of 3 rows accepted above tol 0.0001 (floor_tol; largest ratio 0.0003): " \
-           "rows 2" in out
+           "rows 3" in out
     assert "\nrestart " not in out
     later = {"max_iter": 50, "floor_tol": 1e-3, "resume": True,
              "solver": {"tol": 1e-4, "max_iter": 50, "floor_tol": 1e-3}}
@@ -172,10 +173,10 @@ def test_info_checks(tmp_path, capsys):
                               "block_imbalance": b, "max_overhang": o})
     assert main(["info", str(p)]) == 0
     out = capsys.readouterr().out
-    assert "energy:    balance error at most 0.03 of the gross work (row 1); 2 rows above " \
+    assert "energy:    balance error at most 0.03 of the gross work (row 2); 2 rows above " \
            "energy_tol 0.01" in out
-    assert "blocks:    largest block imbalance ratio 0.25 (row 2); 2 rows above block_tol 0.1" in out
-    assert "overhang:  joint nodes slid at most 4 mm off their master faces (row 1)" in out
+    assert "blocks:    largest block imbalance ratio 0.25 (row 3); 2 rows above block_tol 0.1" in out
+    assert "overhang:  joint nodes slid at most 4 mm off their master faces (row 2)" in out
     q = tmp_path / "old.h5"
     with ResultWriter(q, tiny_model(), cfg) as w:
         w.append_history({"increment": 0, "residual": 1e-5})
