@@ -108,8 +108,8 @@ def energy_per_cycle(history, key, rows=None, force=None):
         v = np.asarray(history[k], dtype=np.float64)[used]
         if not np.all(np.isfinite(v)):
             j = int(np.argmax(~np.isfinite(v)))
-            raise PostprocessError(f"energy_per_cycle: history column {k!r} row {used[j]} is "
-                                   f"{float(v[j])}, not a finite number")
+            raise PostprocessError(f"energy_per_cycle: history column {k!r} row {used[j] + 1} "
+                                   f"(from 1) is {float(v[j])}, not a finite number")
     u = np.asarray(history[key])[sel]
     cum = {k: np.asarray(history[k])[sel] for k in ("D_blocks", "D_joints", "W_ext")}
     f = np.asarray(history[force])[sel] if force is not None else None

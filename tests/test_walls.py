@@ -238,7 +238,7 @@ def test_energy_per_cycle_input_errors(tmp_path):
         energy_per_cycle(dict(h, F=f[:5]), "u", force="F")
     bad = f.copy()
     bad[3] = np.nan
-    with pytest.raises(PostprocessError, match="column 'F' row 3 is nan"):
+    with pytest.raises(PostprocessError, match=r"column 'F' row 4 \(from 1\) is nan"):
         energy_per_cycle(dict(h, F=bad), "u", force="F")
     assert energy_per_cycle(dict(h, F=bad), "u")[0]["D_total"] == 8.0   # F unused
     lines = cycle_text(energy_per_cycle(h, "u")).splitlines()
