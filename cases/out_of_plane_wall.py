@@ -17,7 +17,7 @@ the total force, N): monotonic to 40 mm
 (``protocol=monotonic``) or the cyclic amplitudes 2, 5, 10, 15, 20, 30 mm, one cycle each
 (``protocol=cyclic``, :data:`dr_masonry.protocols.S6`; negative pressure = suction of the
 reversed airbag). Output: total lateral force (pressure x loaded area) against the centre
-displacement.
+displacement; crack and crushing maps of the wall's elevation at the points of ``maps``.
 
 Reference (paper Fig. 20, after Graziotti et al. 2016): diagonal cracks running from the corners to
 the centre and horizontal cracks at the base, at mid-height and at the top; the peak is followed
@@ -41,7 +41,8 @@ from dr_masonry.materials.joint import KC_PEN_FACTOR
 from dr_masonry.model import quad_area_vector
 from dr_masonry.postprocess import cycle_text, energy_per_cycle
 from dr_masonry.protocols import S6
-from dr_masonry.scene import RUN_PARAMS, choice, finish, run_stages, scene_params, solver_summary
+from dr_masonry.scene import (RUN_PARAMS, choice, compare_curve, finish, run_stages, scene_params,
+                              solver_summary, write_maps)
 from dr_masonry.units import MPa, kN, mm
 
 PARAMS = dict(
@@ -126,15 +127,22 @@ def report(sim, hist, push):
             f"centre displacement {u[k] / mm:.2f} mm; " + solver_summary(hist, push))
 
 
+def curve(hist, rows):
+    """Centre displacement and total lateral force (m, N) of the history rows ``rows`` (the load
+    factor of the push is the lateral force)."""
+    return hist["centre.uy"][rows], hist["lambda"][rows]
+
+
 def main(argv=None):
     params = scene_params(PARAMS, FAST, sys.argv[1:] if argv is None else argv, __doc__)
     sim, hist, push = run(params)
     cycles = (energy_per_cycle(hist, "centre.uy", push, force="lateral_force")
               if params["protocol"] == "cyclic" else None)
-    finish(sim, params["out"], x=hist["centre.uy"][push] / mm,
-           y=hist["lateral_force"][push] / kN, xlabel="centre displacement (mm)",
+    x, y = curve(hist, push)
+    finish(sim, params["out"], x=x / mm, y=y / kN, xlabel="centre displacement (mm)",
            ylabel="lateral force (kN)", title=f"S6 out-of-plane wall, {params['protocol']}",
-           cycles=cycles)
+           cycles=cycles, reference=compare_curve(params, "pre_increments", curve))
+    write_maps(sim, params, params["out"], squat_wall.MAPS, y, push)
     print(report(sim, hist, push))
     if cycles:
         print(cycle_text(cycles))

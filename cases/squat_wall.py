@@ -16,7 +16,8 @@ at the centre of the wall's top face:
   (``protocol=cyclic``, :data:`dr_masonry.protocols.S5`).
 
 Output: base shear (the actuator force ``beam.fx``) against top displacement (``beam.ux``); the
-foundation's reactions are recorded as ``base.fx/fy/fz``. Reference (paper Figs. 15-17): shear
+foundation's reactions are recorded as ``base.fx/fy/fz``; crack and crushing maps of the wall at
+the points of ``maps``. Reference (paper Figs. 15-17): shear
 failure with diagonal stair-stepped cracks through joints and blocks, peak base shear about
 equal in the cyclic and monotonic runs. ``variant=PAR_A..PAR_E`` are the sensitivity analyses of
 paper Fig. 18 (doubled ft and u_k; c and delta_k; tan(phi) and mu; block compressive strength and
@@ -47,8 +48,8 @@ from dr_masonry.materials.joint import KC_PEN_FACTOR
 from dr_masonry.params import ParameterError
 from dr_masonry.postprocess import cycle_text, energy_per_cycle
 from dr_masonry.protocols import S5
-from dr_masonry.scene import (RUN_PARAMS, choice, finish, run_stages, scene_params, solver_options,
-                              solver_summary, with_penalty)
+from dr_masonry.scene import (RUN_PARAMS, choice, compare_curve, finish, run_stages, scene_params,
+                              solver_options, solver_summary, with_penalty, write_maps)
 from dr_masonry.units import MPa, kN, mm
 
 PARAMS = dict(
@@ -202,15 +203,27 @@ def report(sim, hist, push):
             + solver_summary(hist, push))
 
 
+def curve(hist, rows):
+    """Top displacement and base shear (m, N) of the history rows ``rows``."""
+    return hist["beam.ux"][rows], hist["beam.fx"][rows]
+
+
+#: crack maps of the wall's elevation: joint damage with block tensile, and with compressive damage
+MAPS = {"cracks": dict(plane="xz", blocks="wall"),
+        "crushing": dict(plane="xz", blocks="wall", element_field="dc")}
+
+
 def main(argv=None, doc=__doc__, defaults=PARAMS, protocol=S5, title="S5 squat wall"):
     params = scene_params(defaults, FAST, sys.argv[1:] if argv is None else argv, doc)
     sim, hist, push = run(params, protocol)
     cycles = (energy_per_cycle(hist, "beam.ux", push, force="beam.fx")
               if params["protocol"] == "cyclic" else None)
-    finish(sim, params["out"], x=hist["beam.ux"][push] / mm, y=hist["beam.fx"][push] / kN,
-           xlabel="top displacement (mm)", ylabel="base shear (kN)",
+    x, y = curve(hist, push)
+    finish(sim, params["out"], x=x / mm, y=y / kN, xlabel="top displacement (mm)",
+           ylabel="base shear (kN)",
            title=f"{title}, {params['protocol']}, {params['bc']}, {params['variant']}",
-           cycles=cycles)
+           cycles=cycles, reference=compare_curve(params, "pre_increments", curve))
+    write_maps(sim, params, params["out"], MAPS, y, push)
     print(report(sim, hist, push))
     if cycles:
         print(cycle_text(cycles))

@@ -21,7 +21,8 @@ courses, weigh as 0.2 m slabs).
 Output: base shear of the whole house (2 x the half model's: twice the floor force, two floors)
 against the top-floor displacement (total reactions ``base.f*``); the vertical reaction of each wall and pier
 (``base_W1.fz``, ``base_W2.fz``, ``base_P1.fz`` wide pier, ``base_P2.fz`` narrow pier, half model,
-N) against it (paper Fig. 26); crack maps of the facade and the transversal walls.
+N) against it (paper Fig. 26, ``out_reactions.png``); crack maps of the facade and of each
+transversal wall and the facade's crushing map at the points of ``maps``.
 
 Reference (paper Figs. 22-26): in the positive direction (towards the narrow pier) a shear/
 vertical crack opens in the wide pier, in the negative direction the piers rock; the peak base
@@ -47,9 +48,10 @@ from dr_masonry.loading import Gravity
 from dr_masonry.materials.joint import KC_PEN_FACTOR
 from dr_masonry.postprocess import cycle_text, energy_per_cycle
 from dr_masonry.protocols import S7
-from dr_masonry.scene import (RUN_PARAMS, choice, finish, run_stages, scene_params, solver_options,
-                              solver_summary, with_penalty)
+from dr_masonry.scene import (RUN_PARAMS, choice, compare_curve, finish, run_stages, scene_params,
+                              solver_options, solver_summary, with_penalty, write_maps)
 from dr_masonry.units import kN, mm
+from dr_masonry.viz.plots import plot_history
 
 PARAMS = dict(
     direction=1,            # +1: push towards the narrow pier (+x), -1: towards the wide pier
@@ -140,7 +142,7 @@ def run(params):
     sim, stages = build(params)
     hist = run_stages(sim, stages, params)
     push = hist["increment"] > stages[0].increments
-    hist["base_shear"] = np.where(push, 2.0 * len(sim.floors) * hist["lambda"], 0.0)
+    hist["base_shear"] = np.where(push, curve(hist, slice(None), len(sim.floors))[1], 0.0)
     return sim, hist, push
 
 
@@ -152,6 +154,22 @@ def report(sim, hist, push):
             f"{u[k] / mm:.2f} mm; " + solver_summary(hist, push))
 
 
+def curve(hist, rows, floors=2):
+    """Top-floor displacement and the whole house's base shear (m, N) of the history rows
+    ``rows``: 2 x the half model's, whose floors' forces are each the load factor."""
+    return hist[f"floor{floors}.ux"][rows], 2.0 * floors * hist["lambda"][rows]
+
+
+def maps(sim):
+    """Crack maps of the facade (piers, spandrels and lintels; x-z) and of each transversal wall
+    (y-z), joint damage with block tensile damage; the facade's crushing map."""
+    g = sim.groups
+    facade = dict(plane="xz", blocks=np.concatenate([g["facade"], g["lintels"]]))
+    return {"facade_cracks": facade, "facade_crushing": dict(facade, element_field="dc"),
+            "wall1_cracks": dict(plane="yz", blocks=g["transversal_wall_1"]),
+            "wall2_cracks": dict(plane="yz", blocks=g["transversal_wall_2"])}
+
+
 def main(argv=None):
     params = scene_params(PARAMS, FAST, sys.argv[1:] if argv is None else argv, __doc__)
     sim, hist, push = run(params)
@@ -159,10 +177,19 @@ def main(argv=None):
     # cycles of the half model: its energies with its own base shear (half the house's)
     cycles = (energy_per_cycle(dict(hist, half_shear=0.5 * hist["base_shear"]), top, push,
                                force="half_shear") if params["protocol"] == "cyclic" else None)
-    finish(sim, params["out"], x=hist[top][push] / mm, y=hist["base_shear"][push] / kN,
-           xlabel="top displacement (mm)", ylabel="base shear, whole house (kN)",
+    x, y = curve(hist, push, len(sim.floors))
+    out = params["out"]
+    finish(sim, out, x=x / mm, y=y / kN, xlabel="top displacement (mm)",
+           ylabel="base shear, whole house (kN)",
            title=f"S7 terraced house, {params['protocol']}, direction {params['direction']:+d}",
-           cycles=cycles)
+           cycles=cycles, reference=compare_curve(
+               params, "gravity_increments", lambda h, r: curve(h, r, len(sim.floors))))
+    if sim.output is not None:   # Fig. 26: the load moves between the walls and the piers
+        plot_history(sim.output, top, [f"{k}.fz" for k in REACTIONS], out + "_reactions.png",
+                     ylabel="vertical reaction, half model (kN)",
+                     title="vertical reactions (paper Fig. 26): P1 wide pier, P2 narrow pier,\n"
+                           "W1, W2 transversal walls")
+    write_maps(sim, params, out, maps(sim), y, push)
     print(report(sim, hist, push))
     if cycles:
         print("cycles of the half model (base shear and energies half the house's):\n"

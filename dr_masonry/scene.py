@@ -7,6 +7,7 @@ import numpy as np
 from .params import ParameterError, output_path, parse_overrides, with_preset
 from .results import make_folder
 from .solver import SolverError
+from .units import kN, mm
 
 
 def scene_params(defaults, fast, argv, doc):
@@ -38,13 +39,17 @@ RUN_PARAMS = dict(
     resume_from=0,          # with resume: from the checkpoint kept after this increment instead
     replot=False,           # write the outputs (curve, CSV, VTK) of the run stored in out.h5, as
                             # far as it went (a stopped run, or one still writing), without running
+    maps="peak,end",        # crack and crushing maps (PNG) at these points: peak (the frame
+                            # nearest the largest |force|), end, increment numbers; "": none
+    compare="",             # results file of another run of the scene drawn on the curve (e.g.
+                            # the monotonic run on the cyclic one)
 )
 #: scene parameters that are :class:`SolverOptions` fields of the same name
 OPTION_KEYS = ("tol", "damping", "coarse", "max_dissipation", "redetect", "max_iter", "max_cuts",
                "floor_tol", "block_tol")
 #: parameters that may differ when a run is continued: how it is solved and written, not what
-SOLVER_KEYS = {"resume", "resume_from", "replot", "progress", "out", "h5", "frames", "solver",
-               *OPTION_KEYS}
+SOLVER_KEYS = {"resume", "resume_from", "replot", "maps", "compare", "progress", "out", "h5",
+               "frames", "solver", *OPTION_KEYS}
 
 
 def choice(params, key, options):
@@ -145,6 +150,88 @@ def solver_summary(hist, rows):
             f"{hist['max_dt'][-1]:.2f}, dc {hist['max_dc'][-1]:.2f}; iterations per increment "
             f"{np.mean(hist['iterations'][rows]):.0f} (max {np.max(hist['iterations'][rows]):.0f});"
             f" relaxation time {np.sum(hist['time_s']):.1f} s{cuts}")
+
+
+def map_points(params):
+    """The points of scene parameter ``maps`` ("peak,end": comma-separated ``peak``, ``end`` and
+    increment numbers; "" or "none": no map) as a list of "peak", "end" and ints."""
+    value = params.get("maps", "")
+    tokens = [t.strip() for t in str(value).split(",") if t.strip()]
+    if tokens == ["none"]:
+        return []
+    points = []
+    for t in tokens:
+        if t in ("peak", "end"):
+            points.append(t)
+        elif t.isdigit():
+            points.append(int(t))
+        else:
+            raise ParameterError(f"parameter maps={value!r}: {t!r} is not peak, end or an "
+                                 "increment number (comma-separated; \"\" or none: no map)")
+    return points
+
+
+def map_frames(result, points, peak_increment):
+    """(tag, frame) of each of ``points`` (:func:`map_points`) in ``result``: the frame nearest
+    ``peak_increment`` (tag "peak") or an increment number (tag: the frame's increment), and for
+    "end" the last frame, or the last checkpoint where the run stopped after it ("checkpoint");
+    points without a stored state are left out."""
+    from .results import CHECKPOINT, ResultsError
+    ids = np.asarray(result.frame_ids)
+    try:
+        ck = result.frame_increment(CHECKPOINT)
+    except ResultsError:
+        ck = None
+    out = []
+    for p in points:
+        if p == "end" and ck is not None and (not ids.size or ck > ids[-1]):
+            out.append(("end", CHECKPOINT))
+        elif ids.size:
+            k = ids.size - 1 if p == "end" else int(np.argmin(np.abs(
+                ids - (peak_increment if p == "peak" else p))))
+            out.append((p if p in ("peak", "end") else str(ids[k]), k))
+    return out
+
+
+def write_maps(sim, params, out, views, force, rows):
+    """Crack and crushing maps ``{out}_{view}_{tag}.png`` of ``views`` ({view: keyword arguments
+    of :func:`dr_masonry.viz.plots.crack_map`}) at the points of ``params["maps"]``; "peak" is
+    the frame nearest the row of the largest ``|force|`` (N, one per row of ``rows``, a bool
+    mask of the history). Returns the written paths (none without a results file)."""
+    points = map_points(params)
+    if not points or sim.output is None:
+        return []
+    from .results import open_result
+    from .viz.plots import crack_map
+    result = open_result(sim.output)
+    inc = np.asarray(sim.history["increment"])[rows]
+    peak = int(inc[int(np.argmax(np.abs(force)))]) if inc.size else 0
+    paths = []
+    for tag, frame in map_frames(result, points, peak):
+        at = f"{tag} (increment {result.frame_increment(frame)})"
+        paths += [crack_map(result, frame, f"{out}_{view}_{tag}.png", title=f"{os.path.basename(out)}"
+                            f" {view.replace('_', ' ')}: {at}", **kw) for view, kw in views.items()]
+    return paths
+
+
+def compare_curve(params, first_stage, curve, xscale=1.0 / mm, yscale=1.0 / kN):
+    """The reference line (x, y, label) of scene parameter ``compare`` (None when empty): the
+    results file's push rows (increment above its parameter ``first_stage``, the increments of
+    the stage before the push) through ``curve(history, rows) -> (x, y)`` (SI), times
+    ``xscale``, ``yscale`` (default mm and kN)."""
+    from .results import open_result
+    path = params.get("compare")
+    if not path:
+        return None
+    if not os.path.exists(path):
+        raise ParameterError(f"parameter compare={path!r}: no such results file")
+    r = open_result(path)
+    if first_stage not in r.config:
+        raise ParameterError(f"parameter compare={path!r}: not a run of this scene (its "
+                             f"parameters have no {first_stage})")
+    h = r.history
+    x, y = curve(h, np.asarray(h["increment"]) > r.config[first_stage])
+    return x * xscale, y * yscale, f"{os.path.basename(path)} ({r.config.get('protocol', 'run')})"
 
 
 def finish(sim, out, x, y, xlabel, ylabel, title, reference=None, vtk=True, cycles=None):

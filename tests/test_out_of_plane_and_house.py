@@ -1,5 +1,7 @@
 """Smoke runs of the S6 out-of-plane wall and the S7 terraced house (fast variants), checked
 against equilibrium, the energy balance and the expected mechanisms."""
+import os
+
 import numpy as np
 import pytest
 
@@ -155,6 +157,12 @@ def test_s7_reduced_cyclic_protocol(tmp_path, capsys):
     assert table["F_min"] == pytest.approx(hist["lambda"][push].min() * 2, rel=1e-12)
     assert 0.0 < table["xi_eq"] < 0.5
     assert "cycles of the half model" in capsys.readouterr().out
+    # Fig. 26's reactions and the crack maps of the facade and of both transversal walls at the
+    # peak and at the end
+    assert os.path.getsize(f"{out}_reactions.png") > 0
+    for view in ("facade_cracks", "facade_crushing", "wall1_cracks", "wall2_cracks"):
+        for at in ("peak", "end"):
+            assert os.path.getsize(f"{out}_{view}_{at}.png") > 0
 
 
 def test_scene_input_errors():

@@ -271,6 +271,48 @@ def test_main_writes_outputs(tmp_path):
     vtu = sorted(p.name for p in (tmp_path / "s5_vtk").glob("blocks_*.vtu"))
     assert vtu == [f"blocks_{i:06d}.vtu" for i in r.frame_ids]
     assert (tmp_path / "s5_vtk" / "blocks.pvd").exists()
+    maps = sorted(p.name for p in tmp_path.glob("s5_*.png"))
+    assert maps == ["s5_cracks_end.png", "s5_cracks_peak.png", "s5_crushing_end.png",
+                    "s5_crushing_peak.png"]
+    # the same run drawn on another's curve: compare= reads its push rows
+    from dr_masonry.scene import compare_curve
+    x, y, label = compare_curve({"compare": str(out) + ".h5"}, "pre_increments", squat_wall.curve)
+    push = r.history["increment"] > squat_wall.FAST["pre_increments"]
+    np.testing.assert_array_equal(x, r.history["beam.ux"][push] * 1e3)
+    np.testing.assert_array_equal(y, r.history["beam.fx"][push] * 1e-3)
+    assert label == "s5.h5 (monotonic)"
+    with pytest.raises(ParameterError, match="compare=.*none.h5.*no such results file"):
+        compare_curve({"compare": str(tmp_path / "none.h5")}, "pre_increments", squat_wall.curve)
+    with pytest.raises(ParameterError, match="not a run of this scene .*gravity_increments"):
+        compare_curve({"compare": str(out) + ".h5"}, "gravity_increments", squat_wall.curve)
+
+
+def test_map_points_and_frames():
+    """Parameter maps: peak, end and increments, comma-separated; each point's frame is the one
+    nearest it, "end" the last frame or a later checkpoint; bad tokens are named."""
+    from dr_masonry.results import CHECKPOINT, ResultsError
+    from dr_masonry.scene import map_frames, map_points
+    assert map_points({"maps": "peak, end,12"}) == ["peak", "end", 12]
+    assert map_points({"maps": ""}) == map_points({"maps": "none"}) == []
+    for bad in ("peak;end", "-3", "last"):
+        with pytest.raises(ParameterError, match=f"maps={bad!r}"):
+            map_points({"maps": bad})
+
+    class Stored:   # what map_frames reads of a Result: frames at 5, 10, 15; a checkpoint
+        frame_ids = [5, 10, 15]
+        ck = 17
+
+        def frame_increment(self, i):
+            if self.ck is None:
+                raise ResultsError("none")
+            return self.ck
+    r = Stored()
+    assert map_frames(r, ["peak", "end", 9, 100], 7) == [("peak", 0), ("end", CHECKPOINT),
+                                                         ("10", 1), ("15", 2)]
+    r.ck = 15   # the checkpoint of the last frame: the frame
+    assert map_frames(r, ["end"], 0) == [("end", 2)]
+    r.frame_ids, r.ck = [], None   # nothing stored: no map
+    assert map_frames(r, ["peak", "end"], 3) == []
 
 
 def test_interrupted_run_resumes(tmp_path, monkeypatch, squat):
