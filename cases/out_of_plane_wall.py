@@ -141,7 +141,8 @@ def main(argv=None):
     x, y = curve(hist, push)
     finish(sim, params["out"], x=x / mm, y=y / kN, xlabel="centre displacement (mm)",
            ylabel="lateral force (kN)", title=f"S6 out-of-plane wall, {params['protocol']}",
-           cycles=cycles, reference=compare_curve(params, "pre_increments", curve))
+           cycles=cycles, label=f"this run ({params['protocol']})",
+           reference=compare_curve(params, "pre_increments", curve))
     write_maps(sim, params, params["out"], squat_wall.MAPS, y, push)
     print(report(sim, hist, push))
     if cycles:

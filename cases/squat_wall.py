@@ -222,7 +222,8 @@ def main(argv=None, doc=__doc__, defaults=PARAMS, protocol=S5, title="S5 squat w
     finish(sim, params["out"], x=x / mm, y=y / kN, xlabel="top displacement (mm)",
            ylabel="base shear (kN)",
            title=f"{title}, {params['protocol']}, {params['bc']}, {params['variant']}",
-           cycles=cycles, reference=compare_curve(params, "pre_increments", curve))
+           cycles=cycles, label=f"this run ({params['protocol']})",
+           reference=compare_curve(params, "pre_increments", curve))
     write_maps(sim, params, params["out"], MAPS, y, push)
     print(report(sim, hist, push))
     if cycles:

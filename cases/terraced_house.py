@@ -182,7 +182,7 @@ def main(argv=None):
     finish(sim, out, x=x / mm, y=y / kN, xlabel="top displacement (mm)",
            ylabel="base shear, whole house (kN)",
            title=f"S7 terraced house, {params['protocol']}, direction {params['direction']:+d}",
-           cycles=cycles, reference=compare_curve(
+           cycles=cycles, label=f"this run ({params['protocol']})", reference=compare_curve(
                params, "gravity_increments", lambda h, r: curve(h, r, len(sim.floors))))
     if sim.output is not None:   # Fig. 26: the load moves between the walls and the piers
         plot_history(sim.output, top, [f"{k}.fz" for k in REACTIONS], out + "_reactions.png",

@@ -209,8 +209,9 @@ def write_maps(sim, params, out, views, force, rows):
     paths = []
     for tag, frame in map_frames(result, points, peak):
         at = f"{tag} (increment {result.frame_increment(frame)})"
-        paths += [crack_map(result, frame, f"{out}_{view}_{tag}.png", title=f"{os.path.basename(out)}"
-                            f" {view.replace('_', ' ')}: {at}", **kw) for view, kw in views.items()]
+        paths += [crack_map(result, frame, f"{out}_{view}_{tag}.png",
+                            title=f"{os.path.basename(out)} {view.replace('_', ' ')}: {at}", **kw)
+                  for view, kw in views.items()]
     return paths
 
 
@@ -234,9 +235,10 @@ def compare_curve(params, first_stage, curve, xscale=1.0 / mm, yscale=1.0 / kN):
     return x * xscale, y * yscale, f"{os.path.basename(path)} ({r.config.get('protocol', 'run')})"
 
 
-def finish(sim, out, x, y, xlabel, ylabel, title, reference=None, vtk=True, cycles=None):
-    """Write ``out.png`` (curve, optional reference (x, y, label)), ``out.csv``, ``out_vtk/``
-    and, for a cyclic run, ``out_cycles.csv`` (``cycles``: the list of
+def finish(sim, out, x, y, xlabel, ylabel, title, reference=None, vtk=True, cycles=None,
+           label="dr_masonry"):
+    """Write ``out.png`` (curve ``label``, optional reference (x, y, label)), ``out.csv``,
+    ``out_vtk/`` and, for a cyclic run, ``out_cycles.csv`` (``cycles``: the list of
     :func:`dr_masonry.postprocess.energy_per_cycle`; displacements m, forces N, energies J).
 
     ``sim`` is closed first so that the HDF5 result is complete. Returns the written paths.
@@ -249,7 +251,7 @@ def finish(sim, out, x, y, xlabel, ylabel, title, reference=None, vtk=True, cycl
     ax = fig.subplots()
     if reference is not None:
         ax.plot(reference[0], reference[1], "k--", lw=1, label=reference[2])
-    ax.plot(x, y, "o-", ms=2, label="dr_masonry")
+    ax.plot(x, y, "o-", ms=2, label=label)
     ax.set(xlabel=xlabel, ylabel=ylabel, title=title)
     ax.grid(alpha=0.3)
     ax.legend()
