@@ -40,7 +40,8 @@ RUN_PARAMS = dict(
     replot=False,           # write the outputs (curve, CSV, VTK) of the run stored in out.h5, as
                             # far as it went (a stopped run, or one still writing), without running
     maps="peak,end",        # crack and crushing maps (PNG) at these points: peak (the frame
-                            # nearest the largest |force|), end, increment numbers; "": none
+                            # nearest the largest |force|; both ways of a cyclic run), peak+,
+                            # peak-, end, increment numbers; "": none
     compare="",             # results file of another run of the scene drawn on the curve (e.g.
                             # the monotonic run on the cyclic one)
 )
@@ -152,30 +153,48 @@ def solver_summary(hist, rows):
             f" relaxation time {np.sum(hist['time_s']):.1f} s{cuts}")
 
 
+#: the named points of parameter ``maps``: the rows of the largest |force|, the largest and the
+#: most negative force, the end
+MAP_NAMES = ("peak", "peak+", "peak-", "end")
+
+
 def map_points(params):
-    """The points of scene parameter ``maps`` ("peak,end": comma-separated ``peak``, ``end`` and
-    increment numbers; "" or "none": no map) as a list of "peak", "end" and ints."""
+    """The points of scene parameter ``maps`` ("peak,end": comma-separated names of
+    :data:`MAP_NAMES` and increment numbers; "" or "none": no map) as a list of names and ints;
+    "peak" of a run loaded both ways means both peaks (:func:`write_maps`)."""
     value = params.get("maps", "")
     tokens = [t.strip() for t in str(value).split(",") if t.strip()]
     if tokens == ["none"]:
         return []
     points = []
     for t in tokens:
-        if t in ("peak", "end"):
+        if t in MAP_NAMES:
             points.append(t)
         elif t.isdigit():
             points.append(int(t))
         else:
-            raise ParameterError(f"parameter maps={value!r}: {t!r} is not peak, end or an "
-                                 "increment number (comma-separated; \"\" or none: no map)")
+            raise ParameterError(f"parameter maps={value!r}: {t!r} is not one of "
+                                 f"{', '.join(MAP_NAMES)} or an increment number (comma-"
+                                 "separated; \"\" or none: no map)")
     return points
 
 
-def map_frames(result, points, peak_increment):
+def peak_increments(increments, force):
+    """{"peak", "peak+", "peak-": increment} of the largest |force|, largest and most negative
+    ``force`` (one per entry of ``increments``; empty: {})."""
+    if not len(increments):
+        return {}
+    return {name: int(increments[k]) for name, k in (
+        ("peak", np.argmax(np.abs(force))), ("peak+", np.argmax(force)),
+        ("peak-", np.argmin(force)))}
+
+
+def map_frames(result, points, named, two_sided=False):
     """(tag, frame) of each of ``points`` (:func:`map_points`) in ``result``: the frame nearest
-    ``peak_increment`` (tag "peak") or an increment number (tag: the frame's increment), and for
-    "end" the last frame, or the last checkpoint where the run stopped after it ("checkpoint");
-    points without a stored state are left out."""
+    the increment of a name in ``named`` ({name: increment}; tag: the name) or of an increment
+    number (tag: the frame's increment), and for "end" the last frame, or the last checkpoint
+    where the run stopped after it ("checkpoint"); with ``two_sided`` (a cyclic run) "peak"
+    stands for "peak+" and "peak-"; points without a stored state are left out."""
     from .results import CHECKPOINT, ResultsError
     ids = np.asarray(result.frame_ids)
     try:
@@ -184,30 +203,37 @@ def map_frames(result, points, peak_increment):
         ck = None
     out = []
     for p in points:
-        if p == "end" and ck is not None and (not ids.size or ck > ids[-1]):
-            out.append(("end", CHECKPOINT))
-        elif ids.size:
-            k = ids.size - 1 if p == "end" else int(np.argmin(np.abs(
-                ids - (peak_increment if p == "peak" else p))))
-            out.append((p if p in ("peak", "end") else str(ids[k]), k))
+        if p == "end":
+            if ck is not None and (not ids.size or ck > ids[-1]):
+                out.append(("end", CHECKPOINT))
+            elif ids.size:
+                out.append(("end", ids.size - 1))
+            continue
+        for q in (("peak+", "peak-") if two_sided and p == "peak" else (p,)):
+            inc = q if isinstance(q, int) else named.get(q)
+            if ids.size and inc is not None:
+                k = int(np.argmin(np.abs(ids - inc)))
+                out.append((str(ids[k]) if isinstance(q, int) else q, k))
     return out
 
 
 def write_maps(sim, params, out, views, force, rows):
     """Crack and crushing maps ``{out}_{view}_{tag}.png`` of ``views`` ({view: keyword arguments
-    of :func:`dr_masonry.viz.plots.crack_map`}) at the points of ``params["maps"]``; "peak" is
-    the frame nearest the row of the largest ``|force|`` (N, one per row of ``rows``, a bool
-    mask of the history). Returns the written paths (none without a results file)."""
+    of :func:`dr_masonry.viz.plots.crack_map`}) at the points of ``params["maps"]``; the peaks
+    (:data:`MAP_NAMES`) are those of ``force`` (N, one per row of ``rows``, a bool mask of the
+    history). Returns the written paths (none without a results file)."""
     points = map_points(params)
     if not points or sim.output is None:
         return []
     from .results import open_result
     from .viz.plots import crack_map
     result = open_result(sim.output)
-    inc = np.asarray(sim.history["increment"])[rows]
-    peak = int(inc[int(np.argmax(np.abs(force)))]) if inc.size else 0
+    force = np.asarray(force, dtype=float)
+    named = peak_increments(np.asarray(sim.history["increment"])[rows], force)
+    # both directions loaded (a cyclic run): the most negative force above a quarter of the largest
+    two_sided = bool(force.size) and -force.min() > 0.25 * force.max() > 0.0
     paths = []
-    for tag, frame in map_frames(result, points, peak):
+    for tag, frame in map_frames(result, points, named, two_sided):
         at = f"{tag} (increment {result.frame_increment(frame)})"
         paths += [crack_map(result, frame, f"{out}_{view}_{tag}.png",
                             title=f"{os.path.basename(out)} {view.replace('_', ' ')}: {at}", **kw)

@@ -291,8 +291,8 @@ def test_map_points_and_frames():
     """Parameter maps: peak, end and increments, comma-separated; each point's frame is the one
     nearest it, "end" the last frame or a later checkpoint; bad tokens are named."""
     from dr_masonry.results import CHECKPOINT, ResultsError
-    from dr_masonry.scene import map_frames, map_points
-    assert map_points({"maps": "peak, end,12"}) == ["peak", "end", 12]
+    from dr_masonry.scene import map_frames, map_points, peak_increments
+    assert map_points({"maps": "peak, end,12,peak-"}) == ["peak", "end", 12, "peak-"]
     assert map_points({"maps": ""}) == map_points({"maps": "none"}) == []
     for bad in ("peak;end", "-3", "last"):
         with pytest.raises(ParameterError, match=f"maps={bad!r}"):
@@ -307,12 +307,16 @@ def test_map_points_and_frames():
                 raise ResultsError("none")
             return self.ck
     r = Stored()
-    assert map_frames(r, ["peak", "end", 9, 100], 7) == [("peak", 0), ("end", CHECKPOINT),
-                                                         ("10", 1), ("15", 2)]
+    named = peak_increments(np.array([2, 7, 12]), np.array([1.0, 3.0, -2.0]))
+    assert named == {"peak": 7, "peak+": 7, "peak-": 12}
+    assert map_frames(r, ["peak", "end", 9, 100], named) == [("peak", 0), ("end", CHECKPOINT),
+                                                             ("10", 1), ("15", 2)]
+    # a run loaded both ways: "peak" maps both directions' peaks
+    assert map_frames(r, ["peak"], named, two_sided=True) == [("peak+", 0), ("peak-", 1)]
     r.ck = 15   # the checkpoint of the last frame: the frame
-    assert map_frames(r, ["end"], 0) == [("end", 2)]
+    assert map_frames(r, ["end"], named) == [("end", 2)]
     r.frame_ids, r.ck = [], None   # nothing stored: no map
-    assert map_frames(r, ["peak", "end"], 3) == []
+    assert map_frames(r, ["peak", "end"], named) == []
 
 
 def test_interrupted_run_resumes(tmp_path, monkeypatch, squat):
