@@ -105,6 +105,9 @@ def run_stages(sim, stages, params):
     note saying where the rows so far are and how to continue (``dr-masonry`` and the case
     scripts print just that note); a :class:`~dr_masonry.solver.SolverError` gets a note naming
     the file of the rows so far."""
+    map_points(params)   # the output parameters are checked before hours of running, not after
+    if params.get("compare") and not os.path.exists(params["compare"]):
+        raise ParameterError(f"parameter compare={params['compare']!r}: no such results file")
     if params.get("resume_from") and not params.get("resume"):
         raise ParameterError(f"parameter resume_from={params['resume_from']!r} continues a stored "
                              f"run: add resume=true (without it the run starts again and "

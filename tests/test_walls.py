@@ -297,6 +297,11 @@ def test_map_points_and_frames():
     for bad in ("peak;end", "-3", "last"):
         with pytest.raises(ParameterError, match=f"maps={bad!r}"):
             map_points({"maps": bad})
+    # a scene refuses them before it runs, not after
+    params = dict(tiny(squat_wall), h5=None)
+    for key, bad, msg in (("maps", "last", "maps='last'"), ("compare", "none.h5", "no such")):
+        with pytest.raises(ParameterError, match=msg):
+            squat_wall.run(dict(params, **{key: bad}))
 
     class Stored:   # what map_frames reads of a Result: frames at 5, 10, 15; a checkpoint
         frame_ids = [5, 10, 15]
