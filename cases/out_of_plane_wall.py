@@ -40,7 +40,7 @@ from dr_masonry.geometry import plane_nodes
 from dr_masonry.materials.joint import KC_PEN_FACTOR
 from dr_masonry.model import quad_area_vector
 from dr_masonry.postprocess import cycle_text, energy_per_cycle
-from dr_masonry.protocols import S6
+from dr_masonry.protocols import S6, turning_points
 from dr_masonry.scene import (RUN_PARAMS, choice, compare_curve, finish, run_stages, scene_params,
                               solver_summary, write_maps)
 from dr_masonry.units import MPa, kN, mm
@@ -105,7 +105,7 @@ def build(params):
                     frames=params["pre_increments"]),
               Stage("push", path.size, [Indirect(pattern=airbag, target=sim.centre, dof="y",
                                                  path=path, name="airbag")],
-                    frames=params["frames"])]
+                    frames=params["frames"], frame_at=turning_points(path))]
     sim.wall = wall
     return sim, stages
 
@@ -143,7 +143,7 @@ def main(argv=None):
            ylabel="lateral force (kN)", title=f"S6 out-of-plane wall, {params['protocol']}",
            cycles=cycles, label=f"this run ({params['protocol']})",
            reference=compare_curve(params, "pre_increments", curve))
-    write_maps(sim, params, params["out"], squat_wall.MAPS, y, push)
+    write_maps(sim, params, params["out"], squat_wall.MAPS, x, y, push)
     print(report(sim, hist, push))
     if cycles:
         print(cycle_text(cycles))

@@ -47,7 +47,7 @@ from dr_masonry.loading import Gravity
 from dr_masonry.materials.joint import KC_PEN_FACTOR
 from dr_masonry.params import ParameterError
 from dr_masonry.postprocess import cycle_text, energy_per_cycle
-from dr_masonry.protocols import S5
+from dr_masonry.protocols import S5, turning_points
 from dr_masonry.scene import (RUN_PARAMS, choice, compare_curve, finish, run_stages, scene_params,
                               solver_options, solver_summary, with_penalty, write_maps)
 from dr_masonry.units import MPa, kN, mm
@@ -183,7 +183,7 @@ def build(params, protocol=S5):
                              n_amplitudes=params["n_amplitudes"] or None)
     stages = [Stage("precompression", params["pre_increments"], pre, frames=params["pre_increments"]),
               Stage("push", path.size, [Displacement(target=beam, dof="x", path=path, name="push")],
-                    frames=params["frames"])]
+                    frames=params["frames"], frame_at=turning_points(path))]
     sim.wall, sim.beam = wall, beam
     return sim, stages
 
@@ -224,7 +224,7 @@ def main(argv=None, doc=__doc__, defaults=PARAMS, protocol=S5, title="S5 squat w
            title=f"{title}, {params['protocol']}, {params['bc']}, {params['variant']}",
            cycles=cycles, label=f"this run ({params['protocol']})",
            reference=compare_curve(params, "pre_increments", curve))
-    write_maps(sim, params, params["out"], MAPS, y, push)
+    write_maps(sim, params, params["out"], MAPS, x, y, push)
     print(report(sim, hist, push))
     if cycles:
         print(cycle_text(cycles))

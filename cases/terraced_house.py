@@ -47,7 +47,7 @@ from dr_masonry.geometry import BrickSpec, HouseParams, terraced_house
 from dr_masonry.loading import Gravity
 from dr_masonry.materials.joint import KC_PEN_FACTOR
 from dr_masonry.postprocess import cycle_text, energy_per_cycle
-from dr_masonry.protocols import S7
+from dr_masonry.protocols import S7, turning_points
 from dr_masonry.scene import (RUN_PARAMS, choice, compare_curve, finish, run_stages, scene_params,
                               solver_options, solver_summary, with_penalty, write_maps)
 from dr_masonry.units import kN, mm
@@ -132,7 +132,7 @@ def build(params):
                     frames=params["gravity_increments"]),
               Stage("push", path.size, [Indirect(pattern=pattern, target=floors[-1], dof="x",
                                                  path=path, name="push")],
-                    frames=params["frames"])]
+                    frames=params["frames"], frame_at=turning_points(path))]
     sim.groups, sim.floors, sim.house = groups, floors, hp
     return sim, stages
 
@@ -189,7 +189,7 @@ def main(argv=None):
                      ylabel="vertical reaction, half model (kN)",
                      title="vertical reactions (paper Fig. 26): P1 wide pier, P2 narrow pier,\n"
                            "W1, W2 transversal walls")
-    write_maps(sim, params, out, maps(sim), y, push)
+    write_maps(sim, params, out, maps(sim), x, y, push)
     print(report(sim, hist, push))
     if cycles:
         print("cycles of the half model (base shear and energies half the house's):\n"

@@ -264,7 +264,9 @@ class Stage:
     """A loading stage: ``increments`` load increments over which ``controls`` move.
 
     ``frames``: write a field frame every this many increments (and at the stage's end);
-    ``max_iter``/``tol`` override the solver options for this stage.
+    ``frame_at``: also after these increments of the stage (counted from 1; e.g. a cyclic path's
+    turning points, :func:`dr_masonry.protocols.turning_points`); ``max_iter``/``tol`` override
+    the solver options for this stage.
     """
     name: str
     increments: int
@@ -272,6 +274,7 @@ class Stage:
     frames: int = 1
     max_iter: int = None
     tol: float = None
+    frame_at: tuple = ()
 
     def __post_init__(self):
         for key, low in (("increments", 1), ("frames", 1), ("max_iter", 1)):
@@ -281,6 +284,12 @@ class Stage:
         self.increments = int(self.increments)
         check_increments(self.increments, f"stage {self.name!r}")
         self.frames = int(self.frames)
+        at = self.frame_at
+        if not (isinstance(at, (list, tuple, np.ndarray)) and all(
+                is_count(k, 1) and k <= self.increments for k in at)):
+            raise LoadingError(f"stage {self.name!r}: frame_at={at!r} must be a list of increments "
+                               f"of the stage, integers in 1..{self.increments}")
+        self.frame_at = tuple(int(k) for k in at)
         self.max_iter = None if self.max_iter is None else int(self.max_iter)
         if self.tol is not None and not tol_ok(self.tol):
             raise LoadingError(f"stage {self.name!r}: tol={self.tol!r} must be a finite number in "

@@ -94,6 +94,13 @@ class Protocol:
         return goal * self._scale(height) * (np.arange(1, n + 1) / n) ** grading
 
 
+def turning_points(path):
+    """Increments (counted from 1) at which a path of targets turns back: its cyclic peaks,
+    where the crack maps of the paper's figures are drawn (``Stage.frame_at``)."""
+    d = np.diff(np.asarray(path, dtype=np.float64))
+    return tuple(int(k) + 1 for k in np.flatnonzero(d[:-1] * d[1:] < 0.0) + 1)
+
+
 #: S4 slender wall: drift (%) of the 2.75 m wall, two cycles each, monotonic to 2.5 %.
 S4 = Protocol("S4", (0.05, 0.1, 0.2, 0.3, 0.5, 0.75, 1.0, 1.5, 2.0), 2, 2.5)
 #: S5 squat wall: drift (%), two cycles each, monotonic to 1.0 %.

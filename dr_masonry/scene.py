@@ -220,11 +220,13 @@ def map_frames(result, points, named, two_sided=False):
     return out
 
 
-def write_maps(sim, params, out, views, force, rows):
+def write_maps(sim, params, out, views, x, force, rows):
     """Crack and crushing maps ``{out}_{view}_{tag}.png`` of ``views`` ({view: keyword arguments
     of :func:`dr_masonry.viz.plots.crack_map`}) at the points of ``params["maps"]``; the peaks
-    (:data:`MAP_NAMES`) are those of ``force`` (N, one per row of ``rows``, a bool mask of the
-    history). Returns the written paths (none without a results file)."""
+    (:data:`MAP_NAMES`) are those of ``force`` (N) against the control displacement ``x`` (m),
+    one of each per row of ``rows`` (a bool mask of the history); each title gives the frame's
+    increment and displacement, and the peak's where the nearest frame is another increment.
+    Returns the written paths (none without a results file)."""
     points = map_points(params)
     if not points or sim.output is None:
         return []
@@ -232,14 +234,21 @@ def write_maps(sim, params, out, views, force, rows):
     from .viz.plots import crack_map
     result = open_result(sim.output)
     force = np.asarray(force, dtype=float)
-    named = peak_increments(np.asarray(sim.history["increment"])[rows], force)
+    inc = np.asarray(sim.history["increment"])[rows].astype(int)
+    named = peak_increments(inc, force)
+    at_inc = dict(zip(inc.tolist(), np.asarray(x, dtype=float).tolist()))
     # both directions loaded (a cyclic run): the most negative force above a quarter of the largest
     two_sided = bool(force.size) and -force.min() > 0.25 * force.max() > 0.0
+
+    def where(k):
+        return f"increment {k}" + (f", {at_inc[k] / mm:.2f} mm" if k in at_inc else "")
     paths = []
     for tag, frame in map_frames(result, points, named, two_sided):
-        at = f"{tag} (increment {result.frame_increment(frame)})"
+        k = result.frame_increment(frame)
+        at = f"{tag}: {where(k)}" + (f" (the peak: {where(named[tag])})"
+                                     if tag in named and named[tag] != k else "")
         paths += [crack_map(result, frame, f"{out}_{view}_{tag}.png",
-                            title=f"{os.path.basename(out)} {view.replace('_', ' ')}: {at}", **kw)
+                            title=f"{os.path.basename(out)} {view.replace('_', ' ')}, {at}", **kw)
                   for view, kw in views.items()]
     return paths
 

@@ -881,7 +881,7 @@ class Simulation:
             goal = {key: vals[i] for key, (ctl, vals) in targets.items()}
             self._increment(stage, targets, goal, indirect, depth=0)
             self.stage_position = (where[0], i + 1, start_values, where[1], n)
-            if (i + 1) % stage.frames == 0 or i == n - 1:
+            if (i + 1) % stage.frames == 0 or i == n - 1 or i + 1 in stage.frame_at:
                 self._write_frame()
             elif self._checkpoint_due():
                 self._write_checkpoint()

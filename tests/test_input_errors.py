@@ -91,6 +91,9 @@ def test_stages_controls_and_patterns_are_checked_when_made():
         (lambda: Stage("s", 0), r"stage 's': increments=0 must be an integer >= 1"),
         (lambda: Stage("s", 2.5), r"increments=2.5"),                # was truncated to 2
         (lambda: Stage("s", 2, frames=0), r"frames=0"),              # ZeroDivisionError
+        (lambda: Stage("s", 2, frame_at=[3]), r"frame_at=\[3\] must be a list of increments of "
+                                              r"the stage, integers in 1..2"),
+        (lambda: Stage("s", 2, frame_at=5), r"frame_at=5"),
         (lambda: Stage("s", 2, max_iter=0), r"max_iter=0"),          # fell back to the option
         (lambda: Stage("s", 2, tol=float("nan")), r"tol=nan"),
         (lambda: Stage("s", 2, tol=0.5), r"stage 's': tol=0.5 must be a finite number in \(0, 0.1\]"),

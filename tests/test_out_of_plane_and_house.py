@@ -157,6 +157,9 @@ def test_s7_reduced_cyclic_protocol(tmp_path, capsys):
     assert table["F_min"] == pytest.approx(hist["lambda"][push].min() * 2, rel=1e-12)
     assert 0.0 < table["xi_eq"] < 0.5
     assert "cycles of the half model" in capsys.readouterr().out
+    # a frame at each turning point of the path (the peaks the maps are drawn at)
+    peaks = hist["increment"][push][np.isclose(np.abs(hist["floor2.ux"][push]), 2.5e-3)]
+    assert peaks.size == 2 and set(peaks.astype(int)) <= set(open_result(f"{out}.h5").frame_ids)
     # Fig. 26's reactions and the crack maps of the facade and of both transversal walls at the
     # peak of each direction (maps=peak of a cyclic run) and at the end
     assert os.path.getsize(f"{out}_reactions.png") > 0

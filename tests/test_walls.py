@@ -258,6 +258,16 @@ def test_cycle_bounds_of_protocols():
         cycle_bounds(np.array([0.0, np.nan]))
 
 
+def test_turning_points():
+    """The increments (from 1) where a cyclic path turns back: its peaks; none on a monotonic
+    path."""
+    from dr_masonry.protocols import turning_points
+    u = cyclic_path([1.0, 2.0], 1, 2)   # 0.5 1 0.5 0 -0.5 -1 -0.5 0 1 2 1 0 -1 -2 -1 0
+    assert turning_points(u) == (2, 6, 10, 14)
+    assert [u[k - 1] for k in turning_points(u)] == [1.0, -1.0, 2.0, -2.0]
+    assert turning_points(np.linspace(0.1, 1.0, 10)) == ()
+
+
 def test_main_writes_outputs(tmp_path):
     """The CLI entry runs the fast preset and writes HDF5, CSV, PNG and VTK."""
     out = tmp_path / "s5"
