@@ -34,7 +34,8 @@ RUN_PARAMS = dict(
     max_cuts=4,             # halvings of an increment before the run stops (SolverOptions)
     floor_tol=0.0,          # accept a stalled increment at this residual (SolverOptions; 0: off)
     block_tol=0.1,          # every block balanced to this fraction of its forces (SolverOptions)
-    frames=5,               # write a field frame every this many increments
+    frames=5,               # write a field frame every this many increments (and at each
+                            # turning point of a cyclic path)
     resume=False,           # continue the run stored in out.h5 from its last checkpoint
     resume_from=0,          # with resume: from the checkpoint kept after this increment instead
     replot=False,           # write the outputs (curve, CSV, VTK) of the run stored in out.h5, as
