@@ -41,8 +41,8 @@ from dr_masonry.materials.joint import KC_PEN_FACTOR
 from dr_masonry.model import quad_area_vector
 from dr_masonry.postprocess import cycle_text, energy_per_cycle
 from dr_masonry.protocols import S6, turning_points
-from dr_masonry.scene import (RUN_PARAMS, choice, compare_curve, finish, run_stages, scene_params,
-                              solver_summary, write_maps)
+from dr_masonry.scene import (RUN_PARAMS, choice, compare_curve, finish, peaks_text, run_stages,
+                              scene_params, solver_summary, write_maps)
 from dr_masonry.units import MPa, kN, mm
 
 PARAMS = dict(
@@ -120,11 +120,11 @@ def run(params):
 
 
 def report(sim, hist, push):
-    """One-line summary: peak lateral force and pressure, damage, iterations per increment."""
-    F, u = hist["lateral_force"][push], hist["centre.uy"][push]
-    k = int(np.argmax(np.abs(F)))
-    return (f"peak lateral force {F[k] / kN:.2f} kN ({F[k] / sim.loaded_area / 1e3:.2f} kPa) at "
-            f"centre displacement {u[k] / mm:.2f} mm; " + solver_summary(hist, push))
+    """One-line summary: peak lateral force (both directions' in a cyclic run) at its centre
+    displacement, and as a pressure; damage, iterations per increment."""
+    u, F = curve(hist, push)
+    return (f"peak lateral force {peaks_text(u, F)} centre displacement (pressure "
+            f"{peaks_text(u, F / sim.loaded_area, 1e3, 'kPa')}); " + solver_summary(hist, push))
 
 
 def curve(hist, rows):

@@ -48,8 +48,9 @@ from dr_masonry.materials.joint import KC_PEN_FACTOR
 from dr_masonry.params import ParameterError
 from dr_masonry.postprocess import cycle_text, energy_per_cycle
 from dr_masonry.protocols import S5, turning_points
-from dr_masonry.scene import (RUN_PARAMS, choice, compare_curve, finish, run_stages, scene_params,
-                              solver_options, solver_summary, with_penalty, write_maps)
+from dr_masonry.scene import (RUN_PARAMS, choice, compare_curve, finish, peaks_text, run_stages,
+                              scene_params, solver_options, solver_summary, with_penalty,
+                              write_maps)
 from dr_masonry.units import MPa, kN, mm
 
 PARAMS = dict(
@@ -196,11 +197,10 @@ def run(params, protocol=S5):
 
 
 def report(sim, hist, push):
-    """One-line summary: peak base shear, its displacement, damage, iterations per increment."""
-    V, u = hist["beam.fx"][push], hist["beam.ux"][push]
-    k = int(np.argmax(np.abs(V)))
-    return (f"peak base shear {V[k] / kN:.2f} kN at top displacement {u[k] / mm:.2f} mm; "
-            + solver_summary(hist, push))
+    """One-line summary: peak base shear (both directions' in a cyclic run) at its top
+    displacement, damage, iterations per increment."""
+    u, V = curve(hist, push)
+    return f"peak base shear {peaks_text(u, V)} top displacement; " + solver_summary(hist, push)
 
 
 def curve(hist, rows):

@@ -48,8 +48,9 @@ from dr_masonry.loading import Gravity
 from dr_masonry.materials.joint import KC_PEN_FACTOR
 from dr_masonry.postprocess import cycle_text, energy_per_cycle
 from dr_masonry.protocols import S7, turning_points
-from dr_masonry.scene import (RUN_PARAMS, choice, compare_curve, finish, run_stages, scene_params,
-                              solver_options, solver_summary, with_penalty, write_maps)
+from dr_masonry.scene import (RUN_PARAMS, choice, compare_curve, finish, peaks_text, run_stages,
+                              scene_params, solver_options, solver_summary, with_penalty,
+                              write_maps)
 from dr_masonry.units import kN, mm
 from dr_masonry.viz.plots import plot_history
 
@@ -147,11 +148,11 @@ def run(params):
 
 
 def report(sim, hist, push):
-    """One-line summary: peak base shear, damage, iterations per increment."""
-    V, u = hist["base_shear"][push], hist[f"{sim.floors[-1].name}.ux"][push]
-    k = int(np.argmax(np.abs(V)))
-    return (f"peak base shear (whole house) {V[k] / kN:.1f} kN at top displacement "
-            f"{u[k] / mm:.2f} mm; " + solver_summary(hist, push))
+    """One-line summary: peak base shear of the whole house (both directions' in a cyclic run)
+    at its top displacement, damage, iterations per increment."""
+    u, V = curve(hist, push, len(sim.floors))
+    return (f"peak base shear (whole house) {peaks_text(u, V)} top displacement; "
+            + solver_summary(hist, push))
 
 
 def curve(hist, rows, floors=2):

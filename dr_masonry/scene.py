@@ -143,6 +143,20 @@ def run_stages(sim, stages, params):
         raise
 
 
+def peaks_text(x, force, unit=kN, unit_name="kN"):
+    """"F kN at u mm" of the largest |force| (N) against displacement ``x`` (m); for a force of
+    both signs (both directions loaded: the most negative above a quarter of the largest) the
+    largest and the most negative, "+F1 kN at u1 mm, -F2 kN at u2 mm"."""
+    x, force = np.asarray(x, dtype=float), np.asarray(force, dtype=float)
+    if not force.size:
+        return "no push row"
+    if -force.min() > 0.25 * force.max() > 0.0:
+        ks = (int(np.argmax(force)), int(np.argmin(force)))
+        return ", ".join(f"{force[k] / unit:+.2f} {unit_name} at {x[k] / mm:+.2f} mm" for k in ks)
+    k = int(np.argmax(np.abs(force)))
+    return f"{force[k] / unit:.2f} {unit_name} at {x[k] / mm:.2f} mm"
+
+
 def solver_summary(hist, rows):
     """Damage maxima at the end, iterations per increment over ``rows`` (bool mask), the
     relaxation time of a run's history and the work lost in attempts that were cut, as one

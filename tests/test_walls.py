@@ -268,6 +268,18 @@ def test_turning_points():
     assert turning_points(np.linspace(0.1, 1.0, 10)) == ()
 
 
+def test_peaks_text():
+    """The report's peak: the largest |force| with its displacement, both directions' peaks
+    where the force takes both signs (a cyclic run), none where there is no push row."""
+    from dr_masonry.scene import peaks_text
+    u = np.array([1.0, 2.0, -1.0, -2.0]) * 1e-3
+    assert peaks_text(u, np.array([10e3, 20e3, -1e3, -4e3])) == "20.00 kN at 2.00 mm"
+    assert peaks_text(u, np.array([10e3, 20e3, -8e3, -6e3])) == \
+        "+20.00 kN at +2.00 mm, -8.00 kN at -1.00 mm"
+    assert peaks_text(u, np.array([-10e3, -20e3, -1e3, -4e3])) == "-20.00 kN at 2.00 mm"
+    assert peaks_text(u[:0], u[:0]) == "no push row"
+
+
 def test_main_writes_outputs(tmp_path):
     """The CLI entry runs the fast preset and writes HDF5, CSV, PNG and VTK."""
     out = tmp_path / "s5"
