@@ -291,8 +291,9 @@ def compare_curve(params, first_stage, curve, xscale=1.0 / mm, yscale=1.0 / kN):
 def finish(sim, out, x, y, xlabel, ylabel, title, reference=None, vtk=True, cycles=None,
            label="dr_masonry"):
     """Write ``out.png`` (curve ``label``, optional reference (x, y, label)), ``out.csv``,
-    ``out_vtk/`` and, for a cyclic run, ``out_cycles.csv`` (``cycles``: the list of
-    :func:`dr_masonry.postprocess.energy_per_cycle`; displacements m, forces N, energies J).
+    ``out_vtk/`` and, for a cyclic run, ``out_cycles.csv`` and the bars of ``out_cycles.png``
+    (``cycles``: the list of :func:`dr_masonry.postprocess.energy_per_cycle`; displacements m,
+    forces N, energies J).
 
     ``sim`` is closed first so that the HDF5 result is complete. Returns the written paths.
     """
@@ -319,7 +320,8 @@ def finish(sim, out, x, y, xlabel, ylabel, title, reference=None, vtk=True, cycl
         cols = list(cycles[0])
         np.savetxt(out + "_cycles.csv", np.array([[c[k] for k in cols] for c in cycles]),
                    delimiter=",", header=",".join(cols), comments="")
-        paths.append(out + "_cycles.csv")
+        from .viz.plots import cycle_energy_plot
+        paths += [out + "_cycles.csv", cycle_energy_plot(cycles, out + "_cycles.png", title)]
     if vtk and sim.output is not None:
         from .viz.vtk_series import export_vtk
         paths.append(export_vtk(sim.output, out + "_vtk"))

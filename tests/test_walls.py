@@ -211,7 +211,12 @@ def test_equivalent_damping_by_hand(tmp_path):
             pass
     out = str(tmp_path / "run")
     paths = finish(Run(), out, u, f, "u", "F", "t", vtk=False, cycles=[c])
-    assert paths[-1] == out + "_cycles.csv"
+    assert paths[-2:] == [out + "_cycles.csv", out + "_cycles.png"]
+    assert os.path.getsize(out + "_cycles.png") > 0
+    from dr_masonry.viz.plots import PlotError, cycle_energy_plot
+    for bad in ([], [{"cycle": 1}], "x"):
+        with pytest.raises(PlotError, match="cycles must be the non-empty list"):
+            cycle_energy_plot(bad, out + "_bad.png")
     table = np.genfromtxt(out + "_cycles.csv", delimiter=",", names=True)
     assert table["xi_eq"] == pytest.approx(c["xi_eq"]) and table["D_total"] == pytest.approx(8.0)
 

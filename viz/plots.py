@@ -197,3 +197,52 @@ def crack_map(result, frame, png, threshold=0.5, field="D", plane="xz", blocks=N
     fig.tight_layout()
     fig.savefig(png, dpi=150)
     return png
+
+
+def cycle_energy_plot(cycles, png, title=None):
+    """Energy dissipated per cycle, stacked joints over blocks (J, bars), and the equivalent
+    viscous damping ratio (line, right axis) where the cycles have it.
+
+    Parameters
+    ----------
+    cycles : list of dict
+        :func:`dr_masonry.postprocess.energy_per_cycle` (``cycle``, ``D_joints``, ``D_blocks``,
+        optional ``xi_eq`` and ``complete``); a partial last cycle is drawn hatched.
+    png : str
+        output file (its extension gives the format; its folder is created).
+    title : str, optional
+
+    Returns
+    -------
+    str
+        ``png``.
+    """
+    cycles = list(cycles) if isinstance(cycles, (list, tuple)) else None
+    if not cycles or not all(isinstance(c, dict) and {"cycle", "D_joints", "D_blocks"} <= set(c)
+                             for c in cycles):
+        raise PlotError("cycle_energy_plot: cycles must be the non-empty list energy_per_cycle "
+                        "returns")
+    png = output_file("cycle_energy_plot", png, error=PlotError)
+    n = np.array([c["cycle"] for c in cycles])
+    dj = np.array([c["D_joints"] for c in cycles])
+    db = np.array([c["D_blocks"] for c in cycles])
+    partial = np.array([not c.get("complete", True) for c in cycles])
+    fig = Figure(figsize=(6.4, 4.0))
+    ax = fig.add_subplot()
+    hatch = ["//" if p else "" for p in partial]
+    ax.bar(n, dj, color="tab:red", label="joints", hatch=hatch)
+    ax.bar(n, db, bottom=dj, color="0.4", label="blocks", hatch=hatch)
+    ax.set_xlabel("cycle" + (" (hatched: partial)" if partial.any() else ""))
+    ax.set_ylabel("energy dissipated in the cycle (J)")
+    ax.set_xticks(n)
+    ax.legend(loc="upper left")
+    if all("xi_eq" in c for c in cycles):
+        ax2 = ax.twinx()
+        ax2.plot(n, [100.0 * c["xi_eq"] for c in cycles], "ko-", ms=3)
+        ax2.set_ylabel("equivalent viscous damping (%), line")
+        ax2.set_ylim(bottom=0.0)
+    if title:
+        ax.set_title(title)
+    fig.tight_layout()
+    fig.savefig(png, dpi=150)
+    return png
