@@ -332,6 +332,8 @@ class Simulation:
         self.coarse = None
         self._resuming = False
         self._checkpoint_stage = None
+        self._inside = False   # the last checkpoint was written inside a cut increment
+        self._checkpoint_inside = False   # the one resumed from was
         self._checkpoint_time = time.perf_counter()
         self._kept_time = self._checkpoint_time   # when a checkpoint was last kept
         self._resume_increment = None
@@ -862,7 +864,8 @@ class Simulation:
         n = stage.increments
         targets = {}
         indirect = None
-        starts = dict(starts) if starts is not None else {}
+        resumed = starts is not None
+        starts = dict(starts) if resumed else {}
         for ctl in stage.controls:
             key = self._key(ctl)
             start = starts.setdefault(key, self.values.get(key, 0.0))
@@ -879,11 +882,16 @@ class Simulation:
             # continues it from there
             self.stage_position = (where[0], i, start_values, where[1], n)
             goal = {key: vals[i] for key, (ctl, vals) in targets.items()}
-            self._increment(stage, targets, goal, indirect, depth=0)
+            # ... unless that part was its last: the controls at its goal, the increment done
+            if not (resumed and i == first and self._checkpoint_inside
+                    and all(self.values.get(k) == v for k, v in goal.items())):
+                self._increment(stage, targets, goal, indirect, depth=0)
             self.stage_position = (where[0], i + 1, start_values, where[1], n)
             if (i + 1) % stage.frames == 0 or i == n - 1 or i + 1 in stage.frame_at:
                 self._write_frame()
-            elif self._checkpoint_due():
+            elif self._checkpoint_due() or self._inside:
+                # a checkpoint a cut part wrote says "inside increment i": one resumed from it
+                # would redo the increment's last part, a repeated row at the same target
                 self._write_checkpoint()
             if self._bar is not None:
                 self._bar.update(1)
@@ -998,7 +1006,7 @@ class Simulation:
         self.dctl_prev = dctl
         self._commit(info, elapsed, energies)
         if depth > 0 and self._checkpoint_due():
-            self._write_checkpoint()   # a part of a cut increment (hard increments take hours)
+            self._write_checkpoint(inside=True)   # a part of a cut increment (hours, some)
 
     def _relax(self, ctrl, pc, tol, max_iter, stall, info):
         """Relax the increment (``R.relax``); with ``options.coarse``, in spans of
@@ -1351,10 +1359,12 @@ class Simulation:
         return (self.writer is not None
                 and time.perf_counter() - self._checkpoint_time >= self.options.checkpoint_s)
 
-    def _write_checkpoint(self):
+    def _write_checkpoint(self, inside=False):
         """Store everything a continued run needs (overwritten at every frame and every
-        ``options.checkpoint_s`` between frames)."""
+        ``options.checkpoint_s`` between frames); ``inside``: after a committed part of a cut
+        increment (the stage position is that increment's)."""
         self._checkpoint_time = time.perf_counter()
+        self._inside = inside
         d = self.dyn
         arrays = {k: getattr(d, k) for k in self._STATE}
         arrays.update(rp_force=self.rp_force, lam=self.lam, f_prev=self.f_prev,
@@ -1365,7 +1375,7 @@ class Simulation:
         meta = {"values": [[list(k), v] for k, v in self.values.items()],
                 "factors": self.factors, "energy": self.energy, "dctl_prev": self.dctl_prev,
                 "history": {k: v for k, v in self.history.items()}, "patterns": [],
-                "stage": list(self.stage_position)}
+                "stage": list(self.stage_position), "inside": inside}
         for name, (pat, P, rpP) in self.patterns.items():
             arrays[f"pattern_P/{name}"] = P
             arrays[f"pattern_rpP/{name}"] = rpP
@@ -1436,6 +1446,7 @@ class Simulation:
         self.energy = dict(meta["energy"])
         self.dctl_prev = meta["dctl_prev"]
         self._checkpoint_stage = meta.get("stage")
+        self._checkpoint_inside = meta.get("inside", True)   # older files: may be
         self.history = {k: list(v) for k, v in meta["history"].items()}
         for name in meta["patterns"]:
             stored = L.StoredPattern(name, arrays[f"pattern_P/{name}"], arrays[f"pattern_rpP/{name}"])

@@ -410,6 +410,40 @@ def test_replot_draws_a_stopped_run_without_running(tmp_path, monkeypatch):
         squat_wall.main(argv[:3] + [f"out={tmp_path / 'none'}", "replot=true"])
 
 
+def test_resume_after_the_last_part_of_a_cut_increment(tmp_path, monkeypatch):
+    """A run stopped when the last part of a cut increment has been committed and checkpointed
+    (before the checkpoint after the increment; runs before this fix wrote none there) resumes
+    with the next increment: no repeated row at the same target (S7 cyclic rows 55-56 and
+    64-65 repeated theirs)."""
+    from dr_masonry.solver import Simulation, SolverOptions
+    init, increment = SolverOptions.__init__, Simulation._increment
+
+    def every_part(self, *a, **k):
+        init(self, *a, **k)
+        self.checkpoint_s = 0.0
+    params = dict(tiny(squat_wall), increments=6, frames=100, max_iter=500, max_cuts=8)
+    _, whole, _ = squat_wall.run(dict(params, h5=str(tmp_path / "whole.h5")))
+    assert whole["cut_iterations"].sum() > 0          # increments were cut
+    monkeypatch.setattr(SolverOptions, "__init__", every_part)
+    stopped = []
+
+    def stop_after_a_cut_one(self, stage, targets, goal, indirect, depth, parent_diss=None):
+        increment(self, stage, targets, goal, indirect, depth, parent_diss)
+        if depth == 0 and self._inside and not stopped:
+            stopped.append(self.increment)
+            raise KeyboardInterrupt
+    monkeypatch.setattr(Simulation, "_increment", stop_after_a_cut_one)
+    h5 = str(tmp_path / "s5.h5")
+    with pytest.raises(KeyboardInterrupt):
+        squat_wall.run(dict(params, h5=h5))
+    assert open_result(h5).checkpoint()[2]["inside"]   # the checkpoint of the last part
+    monkeypatch.setattr(Simulation, "_increment", increment)
+    sim, hist, _ = squat_wall.run(dict(params, h5=h5, resume=True))
+    sim.close()
+    assert stopped and np.array_equal(hist["beam.ux"], whole["beam.ux"])
+    assert np.allclose(hist["beam.fx"], whole["beam.fx"], rtol=1e-3, atol=1.0)
+
+
 def test_checkpoint_between_frames(tmp_path, monkeypatch):
     """With checkpoint_s = 0 the restart data follow every increment even when frames are
     sparse: an interrupted run loses no row and resumes from an increment without a frame."""
