@@ -69,13 +69,13 @@ def energy_per_cycle(history, key, rows=None, force=None):
         per cycle: ``cycle`` (1-based), ``amplitude`` (max |u|, m), ``D_blocks``, ``D_joints``
         and ``D_total`` (J dissipated during the cycle), ``W_ext`` (J, net external work of
         the cycle), ``complete`` (False for a last cycle that has not gone both ways and back
-        to zero: a run stopped inside it). With ``force``: ``u_max``, ``u_min`` (m, extreme displacements), ``F_max``,
-        ``F_min`` (largest and smallest force of the cycle, the column's unit) and ``xi_eq``,
-        the equivalent viscous damping ratio ``D_total / (pi (|F(u_max) u_max| + |F(u_min)
-        u_min|))`` (Jacobsen's ``E_D / (4 pi E_so)`` with the strain energy ``E_so`` of each
-        half cycle at its peak displacement; NaN for a cycle without displacement). The energies
-        are those of the whole model: give the force acting on it (a half model's own, not the
-        whole building's).
+        to zero: a run stopped inside it). With ``force``: ``u_max``, ``u_min`` (m, extreme
+        displacements), ``F_max``, ``F_min`` (largest and smallest force of the cycle, the
+        column's unit) and ``xi_eq``, the equivalent viscous damping ratio ``D_total / (pi
+        (|F(u_max) u_max| + |F(u_min) u_min|))`` (Jacobsen's ``E_D / (4 pi E_so)`` with the
+        strain energy ``E_so`` of each half cycle at its peak displacement; NaN for a cycle
+        without displacement). The energies are those of the whole model: give the force acting
+        on it (a half model's own, not the whole building's).
     """
     if not isinstance(history, Mapping) and isinstance(getattr(history, "history", None), Mapping):
         history = history.history
@@ -153,6 +153,7 @@ def cycle_text(cycles, u_unit=1e-3, f_unit=1e3):
         if missing:
             raise PostprocessError(f"cycle_text: cycle {i} lacks {missing}; give the list "
                                    "energy_per_cycle returns")
+
     def partial(c):
         return "" if c.get("complete", True) else " (partial)"
     if not peaks:
