@@ -107,8 +107,7 @@ def run_stages(sim, stages, params):
     scripts print just that note); a :class:`~dr_masonry.solver.SolverError` gets a note naming
     the file of the rows so far."""
     map_points(params)   # the output parameters are checked before hours of running, not after
-    if params.get("compare") and not os.path.exists(params["compare"]):
-        raise ParameterError(f"parameter compare={params['compare']!r}: no such results file")
+    _compare_path(params)
     if params.get("resume_from") and not params.get("resume"):
         raise ParameterError(f"parameter resume_from={params['resume_from']!r} continues a stored "
                              f"run: add resume=true (without it the run starts again and "
@@ -143,14 +142,21 @@ def run_stages(sim, stages, params):
         raise
 
 
+def two_sided(force):
+    """Whether ``force`` (one per push row) was taken both ways, as in a cyclic run: its most
+    negative value above a quarter of its largest, positive one."""
+    force = np.asarray(force, dtype=float)
+    return bool(force.size) and -force.min() > 0.25 * force.max() > 0.0
+
+
 def peaks_text(x, force, unit=kN, unit_name="kN"):
-    """"F kN at u mm" of the largest |force| (N) against displacement ``x`` (m); for a force of
-    both signs (both directions loaded: the most negative above a quarter of the largest) the
-    largest and the most negative, "+F1 kN at u1 mm, -F2 kN at u2 mm"."""
+    """"F kN at u mm" of the largest |force| (N) against displacement ``x`` (m); for a force
+    taken both ways (:func:`two_sided`) the largest and the most negative, "+F1 kN at u1 mm, -F2
+    kN at u2 mm"."""
     x, force = np.asarray(x, dtype=float), np.asarray(force, dtype=float)
     if not force.size:
         return "no push row"
-    if -force.min() > 0.25 * force.max() > 0.0:
+    if two_sided(force):
         ks = (int(np.argmax(force)), int(np.argmin(force)))
         return ", ".join(f"{force[k] / unit:+.2f} {unit_name} at {x[k] / mm:+.2f} mm" for k in ks)
     k = int(np.argmax(np.abs(force)))
@@ -252,13 +258,11 @@ def write_maps(sim, params, out, views, x, force, rows):
     inc = np.asarray(sim.history["increment"])[rows].astype(int)
     named = peak_increments(inc, force)
     at_inc = dict(zip(inc.tolist(), np.asarray(x, dtype=float).tolist()))
-    # both directions loaded (a cyclic run): the most negative force above a quarter of the largest
-    two_sided = bool(force.size) and -force.min() > 0.25 * force.max() > 0.0
 
     def where(k):
         return f"increment {k}" + (f", {at_inc[k] / mm:.2f} mm" if k in at_inc else "")
     paths = []
-    for tag, frame in map_frames(result, points, named, two_sided):
+    for tag, frame in map_frames(result, points, named, two_sided(force)):
         k = result.frame_increment(frame)
         at = f"{tag}: {where(k)}" + (f" (the peak: {where(named[tag])})"
                                      if tag in named and named[tag] != k else "")
@@ -268,17 +272,23 @@ def write_maps(sim, params, out, views, x, force, rows):
     return paths
 
 
+def _compare_path(params):
+    """The results file of scene parameter ``compare`` (None when empty), checked to exist."""
+    path = params.get("compare")
+    if path and not os.path.exists(path):
+        raise ParameterError(f"parameter compare={path!r}: no such results file")
+    return path or None
+
+
 def compare_curve(params, first_stage, curve, xscale=1.0 / mm, yscale=1.0 / kN):
     """The reference line (x, y, label) of scene parameter ``compare`` (None when empty): the
     results file's push rows (increment above its parameter ``first_stage``, the increments of
     the stage before the push) through ``curve(history, rows) -> (x, y)`` (SI), times
     ``xscale``, ``yscale`` (default mm and kN)."""
     from .results import open_result
-    path = params.get("compare")
-    if not path:
+    path = _compare_path(params)
+    if path is None:
         return None
-    if not os.path.exists(path):
-        raise ParameterError(f"parameter compare={path!r}: no such results file")
     r = open_result(path)
     if first_stage not in r.config:
         raise ParameterError(f"parameter compare={path!r}: not a run of this scene (its "
