@@ -332,8 +332,7 @@ class Simulation:
         self.coarse = None
         self._resuming = False
         self._checkpoint_stage = None
-        self._inside = False   # the last checkpoint was written inside a cut increment
-        self._checkpoint_inside = False   # the one resumed from was
+        self._checkpoint_inside = False   # the checkpoint resumed from is inside a cut increment
         self._checkpoint_time = time.perf_counter()
         self._kept_time = self._checkpoint_time   # when a checkpoint was last kept
         self._resume_increment = None
@@ -889,9 +888,7 @@ class Simulation:
             self.stage_position = (where[0], i + 1, start_values, where[1], n)
             if (i + 1) % stage.frames == 0 or i == n - 1 or i + 1 in stage.frame_at:
                 self._write_frame()
-            elif self._checkpoint_due() or self._inside:
-                # a checkpoint a cut part wrote says "inside increment i": one resumed from it
-                # would redo the increment's last part, a repeated row at the same target
+            elif self._checkpoint_due():
                 self._write_checkpoint()
             if self._bar is not None:
                 self._bar.update(1)
@@ -1364,7 +1361,6 @@ class Simulation:
         ``options.checkpoint_s`` between frames); ``inside``: after a committed part of a cut
         increment (the stage position is that increment's)."""
         self._checkpoint_time = time.perf_counter()
-        self._inside = inside
         d = self.dyn
         arrays = {k: getattr(d, k) for k in self._STATE}
         arrays.update(rp_force=self.rp_force, lam=self.lam, f_prev=self.f_prev,

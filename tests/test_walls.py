@@ -412,11 +412,12 @@ def test_replot_draws_a_stopped_run_without_running(tmp_path, monkeypatch):
 
 def test_resume_after_the_last_part_of_a_cut_increment(tmp_path, monkeypatch):
     """A run stopped when the last part of a cut increment has been committed and checkpointed
-    (before the checkpoint after the increment; runs before this fix wrote none there) resumes
+    (the checkpoint of that part, "inside" the increment, is the last one on disk) resumes
     with the next increment: no repeated row at the same target (S7 cyclic rows 55-56 and
     64-65 repeated theirs)."""
     from dr_masonry.solver import Simulation, SolverOptions
-    init, increment = SolverOptions.__init__, Simulation._increment
+    init, increment, write = (SolverOptions.__init__, Simulation._increment,
+                              Simulation._write_checkpoint)
 
     def every_part(self, *a, **k):
         init(self, *a, **k)
@@ -425,13 +426,18 @@ def test_resume_after_the_last_part_of_a_cut_increment(tmp_path, monkeypatch):
     _, whole, _ = squat_wall.run(dict(params, h5=str(tmp_path / "whole.h5")))
     assert whole["cut_iterations"].sum() > 0          # increments were cut
     monkeypatch.setattr(SolverOptions, "__init__", every_part)
-    stopped = []
+    stopped, last_inside = [], [False]
+
+    def note_checkpoint(self, inside=False):
+        write(self, inside)
+        last_inside[0] = inside
 
     def stop_after_a_cut_one(self, stage, targets, goal, indirect, depth, parent_diss=None):
         increment(self, stage, targets, goal, indirect, depth, parent_diss)
-        if depth == 0 and self._inside and not stopped:
+        if depth == 0 and last_inside[0] and not stopped:
             stopped.append(self.increment)
             raise KeyboardInterrupt
+    monkeypatch.setattr(Simulation, "_write_checkpoint", note_checkpoint)
     monkeypatch.setattr(Simulation, "_increment", stop_after_a_cut_one)
     h5 = str(tmp_path / "s5.h5")
     with pytest.raises(KeyboardInterrupt):
