@@ -15,7 +15,7 @@ with ``T`` the interpolation of the coarse DOFs at the nodes and ``K`` the stiff
 current state: the blocks' elastic strain energy of affine motions (exact for trilinear
 hexahedra; softened by the block's mean damage) and the joints' stiffnesses at each contact
 point (slave node against master point): secant where the point softens or slides in the current
-trial state, elastic unloading elsewhere. Dynamic relaxation then only has to remove what
+trial state (tangentially: along its traction only), elastic unloading elsewhere. Dynamic relaxation then only has to remove what
 the affine blocks cannot represent, local and fast: a two-level method with relaxation as the
 smoother. The operator is factorised once per increment (sparse LU, symmetric ordering). A
 step is accepted only if it lowers the total potential energy of the trial state (halved twice
@@ -36,7 +36,7 @@ import scipy.sparse.linalg as spla
 
 from .kernels import relaxation as R
 from .kernels.config import plain
-from .kernels.contact_frame import quad_shape
+from .kernels.contact_frame import quad_shape, quad_tangents
 from .kernels.joint_law import JS_D, JS_DP1, JS_DP2
 from .kernels.plastic_damage import MP_LAM, MP_MU, MS_DC, MS_DT
 from .model import quad_normal
@@ -179,22 +179,27 @@ class BlockCoarse:
             gap, tr = c.gaps, c.trac
             un = np.where(gap[:, 0] == 0.0, 1.0, gap[:, 0])
             kn = np.where(np.abs(gap[:, 0]) > 1e-12, tr[:, 0] / un, self.kc_el)
-            # tangential: the secant where the point slides or softens in the current trial state
-            # (its tangent is near zero there); elsewhere kss, the stiffness with which a point
-            # that slid before sticks or unloads (the law's slider keeps its slip). With the
-            # secant everywhere, most post-peak S5 increments gave the correction up after two
-            # rejections (a step rejected at a quarter of its length met over 8 x the stiffness
-            # the operator assumed): BENCHMARKS.md section 22
+            # tangential: kss, the stiffness with which a point that slid before sticks or
+            # unloads (the law's slider keeps its slip), except along the traction of a point
+            # that slides or softens in the current trial state (plastic slip or damage moving),
+            # which gets its secant |tau| / |slip| there (its tangent is near zero). Across the
+            # traction such a point stays elastic: a slip increment ds across it turns the
+            # traction on the yield circle, by kss ds to first order (the law's radial return).
+            # With the secant everywhere, most post-peak S5 increments gave the correction up
+            # after two rejections (BENCHMARKS.md section 22); with the secant in every
+            # tangential direction, coarse steps carried cracked walls out of plane (section 50)
             slip = np.hypot(gap[:, 1], gap[:, 2])
             moving = ((c.s_new[:, JS_D] > c.s_old[:, JS_D]) | (c.s_new[:, JS_DP1] != c.s_old[:, JS_DP1])
-                      | (c.s_new[:, JS_DP2] != c.s_old[:, JS_DP2]))
-            kt = np.where(moving & (slip > 1e-12),
-                          np.hypot(tr[:, 1], tr[:, 2]) / np.maximum(slip, 1e-300), self.kt_el)
+                      | (c.s_new[:, JS_DP2] != c.s_old[:, JS_DP2])) & (slip > 1e-12)
             kn = np.clip(kn, 0.0, None) * c.area
-            kt = np.clip(kt, 0.0, None) * c.area
+            kt = np.clip(self.kt_el, 0.0, None) * c.area
             nrm = self.normal
             K = (kn - kt)[:, None, None] * nrm[:, :, None] * nrm[:, None, :] \
                 + kt[:, None, None] * np.eye(3)[None]
+            if moving.any():
+                ksec = np.hypot(tr[moving, 1], tr[moving, 2]) / slip[moving] * c.area[moving]
+                e = self._traction_direction(moving, X, tr, gap)
+                K[moving] += (ksec - kt[moving])[:, None, None] * e[:, :, None] * e[:, None, :]
             # K_joints = B^T diag(K_c) B, B (3 nc, ndof) the relative motion of each point
             Ts, Tm = self._interp(gs, ds, nbg), self._interp(gm, dm, nbg)
             nc = c.slave.size
@@ -221,6 +226,21 @@ class BlockCoarse:
                                      shape=(ndof, ndof)).tocsr()
             Kc = blocks_k if Kc is None else Kc + blocks_k
         return Kc
+
+    def _traction_direction(self, on, X, tr, gap):
+        """Unit global direction (m, 3) of the tangential traction of contact points ``on``
+        (mask (nc,)): local [tau1, tau2] ``tr[:, 1:]`` (slip ``gap[:, 1:]`` where it is zero) on
+        the master face's frame t1 = a1 / |a1|, t2 = n x t1 (:mod:`~dr_masonry.kernels.contact_frame`)."""
+        c = self.sim.cont
+        a = plain(quad_tangents)(np.moveaxis(X[c.master[on]], 0, -1), c.xi[on, 0], c.xi[on, 1])
+        n = self.normal[on]
+        t1 = np.column_stack(a[:3])
+        t1 -= (t1 * n).sum(axis=1)[:, None] * n
+        t1 /= np.linalg.norm(t1, axis=1)[:, None]
+        t2 = np.cross(n, t1)
+        v = np.where((np.abs(tr[on, 1:]).max(axis=1) > 0.0)[:, None], tr[on, 1:], gap[on, 1:])
+        e = v[:, :1] * t1 + v[:, 1:] * t2
+        return e / np.linalg.norm(e, axis=1)[:, None]
 
     def potential(self, lam):
         """Total potential energy (J) of the current trial state: stored energy of blocks and

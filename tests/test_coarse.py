@@ -96,9 +96,13 @@ def test_one_correction_from_rest(kc):
 
 
 def test_joint_stiffness_secant_only_where_it_slides():
-    """A block on a fixed foundation, every joint point closed with slip 1 mm under tau = 0.2 MPa:
-    the coarse stiffness of the block's x translation is kss A (the unloading stiffness) while the
-    points stick, and the secant tau / slip A once the trial state slides (plastic slip moving)."""
+    """A block on a fixed foundation, every joint point closed with slip 1 mm under tau = 0.2 MPa
+    in the direction (0.6, 0.8) of its face's frame: while the points stick, the coarse stiffness
+    of the block's translation is kss A in both tangential directions (the unloading stiffness);
+    once the trial state slides (plastic slip moving) it is the secant tau / slip A along the
+    traction and still kss A across it (a slip across the traction turns it on the yield circle),
+    kn A normal to the joint, with the frame of the contact-frame kernel."""
+    from dr_masonry.kernels.contact_frame import contact_frame
     from dr_masonry.kernels.joint_law import JS_DP1
     m = Model()
     m.set_joint_law(JointLaw.dry(0.6))
@@ -108,16 +112,27 @@ def test_joint_stiffness_secant_only_where_it_slides():
     sim = Simulation(m)
     sim.build()
     c = sim.cont
-    c.gaps[:] = [-1e-6, 1e-3, 0.0]
-    c.trac[:] = [-1e5, 2e5, 0.0]
+    c.gaps[:] = [-1e-6, 0.6e-3, 0.8e-3]
+    c.trac[:] = [-1e5, 1.2e5, 1.6e5]
     co = BlockCoarse(sim)
     g, nbg = co.groups()
     dof, ndof = co.dof_map(nbg, 0)
-    ix = dof[g[blk], 0]
+    ix = dof[g[blk], :3]
     area = c.area.sum()
     assert area == pytest.approx(0.02)
-    stick = co.matrix(g, nbg, dof, ndof)[ix, ix]
-    assert stick == pytest.approx(m.joint_laws[0].kss * area, rel=1e-12)
+    frame, xm = np.empty((3, 3)), np.empty(3)
+    contact_frame(m.nodes[c.master[0]], c.xi[0, 0], c.xi[0, 1], xm, frame)
+    n, t1, t2 = frame
+    law = m.joint_laws[0]
+    kn = 1e5 / 1e-6
+    stick = co.matrix(g, nbg, dof, ndof)[ix][:, ix].toarray()
+    ref = area * (kn * np.outer(n, n) + law.kss * (np.eye(3) - np.outer(n, n)))
+    assert np.allclose(stick, ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max())
     c.s_new[:, JS_DP1] = c.s_old[:, JS_DP1] + 1e-4
-    slide = co.matrix(g, nbg, dof, ndof)[ix, ix]
-    assert slide == pytest.approx(2e5 / 1e-3 * area, rel=1e-12)
+    slide = co.matrix(g, nbg, dof, ndof)[ix][:, ix].toarray()
+    e = 0.6 * t1 + 0.8 * t2
+    ref += area * (2e5 / 1e-3 - law.kss) * np.outer(e, e)
+    assert np.allclose(slide, ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max())
+    assert e @ slide @ e == pytest.approx(2e5 / 1e-3 * area, rel=1e-12)
+    across = np.cross(n, e)
+    assert across @ slide @ across == pytest.approx(law.kss * area, rel=1e-12)
