@@ -15,13 +15,13 @@ with ``T`` the interpolation of the coarse DOFs at the nodes and ``K`` the stiff
 current state: the blocks' elastic strain energy of affine motions (exact for trilinear
 hexahedra; softened by the block's mean damage) and the joints' stiffnesses at each contact
 point (slave node against master point): secant where the point softens or slides in the current
-trial state (tangentially: along its traction only), elastic unloading elsewhere. Dynamic relaxation then only has to remove what
-the affine blocks cannot represent, local and fast: a two-level method with relaxation as the
-smoother. The operator is factorised once per increment (sparse LU, symmetric ordering). A
-step is accepted only if it lowers the total potential energy of the trial state (halved twice
-before giving up; the out-of-balance norm is no guide, as a coarse motion leaves element-scale
-residuals); it changes trial states only, never the committed history, so it cannot damage
-anything the relaxation would not.
+trial state (tangentially: along its traction only), elastic unloading elsewhere. Dynamic
+relaxation then only has to remove what the affine blocks cannot represent, local and fast: a
+two-level method with relaxation as the smoother. The operator is factorised once per increment
+(sparse LU, symmetric ordering). A step is accepted only if it lowers the total potential energy
+of the trial state (halved twice before giving up; the out-of-balance norm is no guide, as a
+coarse motion leaves element-scale residuals); it changes trial states only, never the committed
+history, so it cannot damage anything the relaxation would not.
 
 Fixed blocks and blocks tied to reference points are not coarse unknowns (the latter move with
 their reference point, whose free DOFs are); held node DOFs of the other blocks (supports,
@@ -230,7 +230,8 @@ class BlockCoarse:
     def _traction_direction(self, on, X, tr, gap):
         """Unit global direction (m, 3) of the tangential traction of contact points ``on``
         (mask (nc,)): local [tau1, tau2] ``tr[:, 1:]`` (slip ``gap[:, 1:]`` where it is zero) on
-        the master face's frame t1 = a1 / |a1|, t2 = n x t1 (:mod:`~dr_masonry.kernels.contact_frame`)."""
+        the master face's frame t1 = a1 / |a1|, t2 = n x t1
+        (:mod:`~dr_masonry.kernels.contact_frame`), ``X`` (n, 3) the nodes' coordinates (m)."""
         c = self.sim.cont
         a = plain(quad_tangents)(np.moveaxis(X[c.master[on]], 0, -1), c.xi[on, 0], c.xi[on, 1])
         n = self.normal[on]
