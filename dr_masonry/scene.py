@@ -32,6 +32,8 @@ RUN_PARAMS = dict(
     redetect=True,          # finite sliding of the joints (SolverOptions.redetect)
     max_iter=200_000,       # iteration cap of an increment before it is cut (SolverOptions)
     max_cuts=4,             # halvings of an increment before the run stops (SolverOptions)
+    stall_iter=10_000,      # iterations without 10 % progress before an attempt is cut
+                            # (SolverOptions; 0: never)
     floor_tol=0.0,          # accept a stalled increment at this residual (SolverOptions; 0: off)
     block_tol=0.1,          # every block balanced to this fraction of its forces (SolverOptions)
     frames=5,               # write a field frame every this many increments (and at each
@@ -48,7 +50,7 @@ RUN_PARAMS = dict(
 )
 #: scene parameters that are :class:`SolverOptions` fields of the same name
 OPTION_KEYS = ("tol", "damping", "coarse", "max_dissipation", "redetect", "max_iter", "max_cuts",
-               "floor_tol", "block_tol")
+               "stall_iter", "floor_tol", "block_tol")
 #: parameters that may differ when a run is continued: how it is solved and written, not what
 SOLVER_KEYS = {"resume", "resume_from", "replot", "maps", "compare", "progress", "out", "h5",
                "frames", "solver", *OPTION_KEYS}

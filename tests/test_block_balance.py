@@ -9,7 +9,7 @@ import pytest
 from dr_masonry import SolverOptions
 from dr_masonry.cases import squat_wall
 from dr_masonry.kernels import relaxation as R
-from dr_masonry.scene import RUN_PARAMS, scene_params
+from dr_masonry.scene import OPTION_KEYS, RUN_PARAMS, scene_params, solver_options
 from dr_masonry.solver import BLOCK_IMBALANCE_WARN, LOOSE_BLOCK, OptionsError
 
 
@@ -65,8 +65,17 @@ def test_block_tol_is_validated(value):
         SolverOptions(block_tol=value)
 
 
-def test_block_tol_is_a_scene_parameter():
-    assert RUN_PARAMS["block_tol"] == SolverOptions().block_tol == 0.1
+def test_solver_option_parameters_default_to_the_solver_defaults():
+    """Every scene parameter that is a SolverOptions field has the solver's default (``coarse``
+    aside: the scenes switch it on) and reaches the options of a run."""
+    keys = set(OPTION_KEYS) - {"coarse"}
+    assert keys <= set(RUN_PARAMS)
+    assert {k: RUN_PARAMS[k] for k in keys} == {k: getattr(SolverOptions(), k) for k in keys}
+    assert RUN_PARAMS["block_tol"] == 0.1
+    params = scene_params(squat_wall.PARAMS, squat_wall.FAST, ["stall_iter=3000", "block_tol=0"],
+                          squat_wall.__doc__)
+    o = solver_options(params)
+    assert (o.stall_iter, o.block_tol, o.coarse) == (3000, 0.0, True)
 
 
 def test_a_block_far_out_of_balance_is_named_once(tmp_path):
