@@ -270,7 +270,7 @@ class BlockCoarse:
         """Mark the coarse operator out of date (a new increment, or a rejected step)."""
         self.op = None
 
-    def _operator(self, ctrl):
+    def operator(self, ctrl):
         """Factorised coarse operator of the current state: a dict with the groups, the node
         arms and interpolations, the kept DOFs ``idx``, ``solve``, the control direction ``tc``
         and the coarse response ``b`` to the indirect pattern (both None without control)."""
@@ -331,10 +331,10 @@ class BlockCoarse:
                 tn = d.rpnodes[d.rpptr[p]:d.rpptr[p + 1]]
                 prp[p, :3] += d.P[tn].sum(axis=0)
                 prp[p, 3:] += np.cross(d.X[tn] - d.rpX[p], d.P[tn]).sum(axis=0)
-            op["b"] = solve(self._project(op, d.P, prp)[idx])
+            op["b"] = solve(self.project(op, d.P, prp)[idx])
         return op
 
-    def _project(self, op, f_nodes, f_rp):
+    def project(self, op, f_nodes, f_rp):
         """Coarse vector (ndof,) T^T f: nodal forces (n, 3) of the block groups as their sums
         and first moments about the block centres, plus the reference points' generalised
         forces (nr, 6)."""
@@ -350,6 +350,19 @@ class BlockCoarse:
         out[NB * nbg:] = f_rp.ravel()
         return out
 
+    def prolong(self, op, dq_k):
+        """Nodal displacements (m, 3) of the operator's nodes ``op["nodes"]`` (m,) and the
+        reference points' (nr, 6) of coarse unknowns ``dq_k`` (its kept DOFs ``op["idx"]``), held
+        DOFs zero."""
+        d = self.sim.dyn
+        nbg, g, arm = op["nbg"], op["g"], op["arm"]
+        dq = np.zeros(op["ndof"])
+        dq[op["idx"]] = dq_k
+        qb = dq[:NB * nbg].reshape(nbg, NB)[g]                 # (m, 12)
+        du = (qb[:, :3] + np.einsum("mkj,mj->mk", qb[:, 3:].reshape(-1, 3, 3), arm)) \
+            * d.free[op["nodes"]]
+        return du, dq[NB * nbg:].reshape(op["nr"], NR) * d.rpfree
+
     def correct(self, lam_arr, rpres, ctrl):
         """Apply one coarse correction to ``sim.dyn`` (after ``internal_forces`` and ``residual``
         of the current state); returns True if it lowered the potential energy (else undone).
@@ -364,13 +377,12 @@ class BlockCoarse:
         d = sim.dyn
         lam = lam_arr[0]
         if self.op is None:
-            self.op = self._operator(ctrl)
+            self.op = self.operator(ctrl)
         op = self.op
         if op is None:
             return False
-        nbg, nr, idx, tc = op["nbg"], op["nr"], op["idx"], op["tc"]
-        nodes, g, arm = op["nodes"], op["g"], op["arm"]
-        dq_k = op["solve"](self._project(op, d.res, rpres)[idx])
+        idx, tc, nodes = op["idx"], op["tc"], op["nodes"]
+        dq_k = op["solve"](self.project(op, d.res, rpres)[idx])
         dlam = 0.0
         if tc is not None:
             b = op["b"]
@@ -381,12 +393,7 @@ class BlockCoarse:
         if not (np.all(np.isfinite(dq_k)) and np.isfinite(dlam)):
             self.op = None
             return False
-        dq = np.zeros(op["ndof"])
-        dq[idx] = dq_k
-        qb = dq[:NB * nbg].reshape(nbg, NB)[g]                 # (m, 12)
-        du = (qb[:, :3] + np.einsum("mkj,mj->mk", qb[:, 3:].reshape(-1, 3, 3), arm)) \
-            * d.free[nodes]
-        drp = dq[NB * nbg:].reshape(nr, NR) * d.rpfree
+        du, drp = self.prolong(op, dq_k)
         # the step of a linear coarse model, scaled back while it raises the potential energy
         U0, rpU0 = d.U.copy(), d.rpU.copy()
         self.n_corrections += 1
