@@ -1,0 +1,204 @@
+"""Is the out-of-balance force of a creeping increment differentiable, and what does a
+matrix-free Newton-Krylov step do there? (BENCHMARKS.md section 52)
+
+Runs scene ``scene`` (default: the main job, S5 coarse mesh) to row ``row`` and, once its
+relaxation has run ``at`` iterations (at the end of the compiled call that passes them), freezes
+the state and probes the out-of-balance force F(x) of the free DOFs x (nodes and reference points;
+the trial state of an increment is a function of the displacements alone):
+
+* the contact points that damage or slide in the trial state;
+* finite-difference directional derivatives A(v) = -(F(x + h v) - F(x)) / h, h scaled so that
+  the largest component moves by ``h`` times the largest displacement, along random directions
+  and along the relaxation's velocity (the creep): their additivity |A(u + v) - A(u) - A(v)| and
+  odd symmetry |A(-u) + A(u)|, both 0 where F has a Jacobian;
+* one Newton step on those products, K dx = F (K = -dF/dx), by right-preconditioned GMRES of at
+  most ``krylov`` iterations with the fictitious masses (Jacobi) and with the coarse affine-block
+  space added (:mod:`dr_masonry.coarse`): GMRES's own residual, the true one recomputed at its
+  answer, and the residual ratio after a backtracking line search (each product is one force
+  evaluation, the cost of about one relaxation iteration);
+
+then lets the relaxation finish the row from the frozen state and reports its iterations. Run:
+``NUMBA_NUM_THREADS=1 python benchmarks/newton_krylov.py [scene=squat_wall row=17 at=2000
+krylov=200 h=1e-8]`` (about 30 s); writes ``benchmarks/out/newton_krylov*.csv``.
+"""
+import os
+
+import numpy as np
+
+import common
+
+DEFAULTS = dict(scene="squat_wall", row=17, at=2000, krylov=200, h=1e-8, seed=1)
+
+
+class _Done(Exception):
+    """The probed row is committed."""
+
+
+class Probe:
+    """F(x), its finite-difference products and a Newton-Krylov step at the frozen state of
+    ``sim``."""
+
+    def __init__(self, sim, h):
+        from dr_masonry.coarse import BlockCoarse
+        d = sim.dyn
+        self.sim, self.h = sim, h
+        self.nm = (d.free > 0) & (d.tied[:, None] < 0)   # (n, 3) free DOFs of untied nodes
+        self.rm = d.rpfree > 0                            # (nr, 6)
+        self.rpres = np.zeros((d.rpX.shape[0], 6))
+        self.lam = float(sim.lam[0])
+        self.evals = 0
+        self.x0 = np.concatenate([d.U[self.nm], d.rpU[self.rm]])
+        self.F0 = self.F(self.x0)
+        self.ratio0 = self.ratio()
+        self.scale = max(np.abs(self.x0).max(), 1e-3)
+        c = sim.coarse if sim.coarse is not None else BlockCoarse(sim)
+        self.coarse, self.op = c, c.operator(np.zeros(3, dtype=np.int64))
+        self.dinv = self.pack(np.repeat(d.minv[:, None], 3, axis=1), d.rpminv)
+
+    def pack(self, nodal, rp):
+        """Vector (m,) of the free DOFs of nodal (n, 3) and reference-point (nr, 6) arrays."""
+        return np.concatenate([nodal[self.nm], rp[self.rm]])
+
+    def unpack(self, v):
+        nodal = np.zeros(self.nm.shape)
+        rp = np.zeros(self.rm.shape)
+        k = int(self.nm.sum())
+        nodal[self.nm], rp[self.rm] = v[:k], v[k:]
+        return nodal, rp
+
+    def F(self, x):
+        """Out-of-balance forces (m,) N of the free DOFs at x (m,) m / rad."""
+        from dr_masonry.kernels import relaxation as R
+        s, d = self.sim, self.sim.dyn
+        k = int(self.nm.sum())
+        d.U[self.nm], d.rpU[self.rm] = x[:k], x[k:]
+        R.place_rigid_nodes(d)
+        R.internal_forces(s.mesh, s.cont, d)
+        R.residual(d, self.lam, self.rpres)
+        self.evals += 1
+        return np.concatenate([d.res[self.nm], self.rpres[self.rm]])
+
+    def ratio(self):
+        """The solver's convergence ratio of the last ``F``: max(global ratio, scaled block
+        ratio), as in ``R.relax``."""
+        from dr_masonry.kernels import relaxation as R
+        s, d = self.sim, self.sim.dyn
+        rn, ref = R.norms(d, self.lam, self.rpres)
+        o = s.options
+        rb = (o.tol * R.block_imbalance(s.cont, d, self.lam, d.bratio)[0] / o.block_tol
+              if o.block_tol > 0 else 0.0)
+        return max(rn / max(ref, s.ref_floor), rb)
+
+    def A(self, v):
+        """Finite-difference product -(F(x0 + e v) - F(x0)) / e, N/m."""
+        e = self.h * self.scale / max(np.abs(v).max(), 1e-300)
+        return -(self.F(self.x0 + e * v) - self.F0) / e
+
+    def precondition(self, r, coarse):
+        """Fictitious-mass (Jacobi) preconditioner, plus the coarse affine-block solve."""
+        z = self.dinv * r
+        if coarse and self.op is not None:
+            nodal, rp = self.unpack(r)
+            dq = self.op["solve"](self.coarse.project(self.op, nodal, rp)[self.op["idx"]])
+            du, drp = self.coarse.prolong(self.op, dq)
+            full = np.zeros(self.nm.shape)
+            full[self.op["nodes"]] = du
+            z += self.pack(full, drp)
+        return z
+
+    def newton_step(self, krylov, coarse):
+        """One Newton step from x0: a table row."""
+        import scipy.sparse.linalg as spla
+        n = self.x0.size
+        e0 = self.evals
+        AM = spla.LinearOperator((n, n), matvec=lambda y: self.A(self.precondition(y, coarse)))
+        res = []
+        y, _ = spla.gmres(AM, self.F0, rtol=1e-2, restart=krylov, maxiter=1,
+                          callback=res.append, callback_type="pr_norm")
+        dx = self.precondition(y, coarse)
+        true = np.linalg.norm(self.F0 - self.A(dx)) / np.linalg.norm(self.F0)
+        step, after = 1.0, self.ratio0
+        while step >= 1.0 / 32:
+            self.F(self.x0 + step * dx)
+            after = self.ratio()
+            if after < self.ratio0:
+                break
+            step *= 0.5
+        else:
+            step = 0.0
+        self.F(self.x0)   # back to the frozen state
+        return dict(preconditioner="masses + coarse" if coarse else "masses",
+                    gmres_iterations=len(res), gmres_residual=float(res[-1]) if res else 1.0,
+                    true_residual=float(true), largest_dx_mm=float(np.abs(dx[:self.nm.sum()]).max() * 1e3),
+                    line_search_step=step, ratio_before=self.ratio0,
+                    ratio_after=float(after), force_evaluations=self.evals - e0)
+
+
+class Monitor:
+    """Probe row ``row`` once ``at`` iterations into it; stop when the row is committed."""
+
+    def __init__(self, params):
+        self.p = params
+        self.rows, self.newton, self.frozen_at = None, None, 0
+
+    def __call__(self, sim, info, done):
+        row = self.p["row"]
+        if sim.increment >= row:
+            raise _Done
+        if sim.increment + 1 != row or self.rows is not None or done < self.p["at"]:
+            return
+        from dr_masonry.kernels import joint_law as J
+        from dr_masonry.kernels import relaxation as R
+        snap = sim._snapshot()
+        pr = Probe(sim, self.p["h"])
+        c = sim.cont
+        damaging = int((c.s_new[:, J.JS_D] > c.s_old[:, J.JS_D]).sum())
+        sliding = int(((c.s_new[:, J.JS_DP1] != c.s_old[:, J.JS_DP1])
+                       | (c.s_new[:, J.JS_DP2] != c.s_old[:, J.JS_DP2])).sum())
+        self.frozen_at = done
+        print(f"row {row}, {done} iterations in: ratio {pr.ratio0:.3e}; contact points "
+              f"{c.slave.size}, damaging {damaging}, sliding {sliding}", flush=True)
+        rng = np.random.default_rng(self.p["seed"])
+        creep = pr.pack(sim.dyn.V, sim.dyn.rpV)
+        creep /= np.abs(creep).max()
+        pairs = {"random, random": (rng.standard_normal(creep.size), rng.standard_normal(creep.size)),
+                 "creep, random / 100": (creep, 1e-2 * rng.standard_normal(creep.size))}
+        self.rows = []
+        for name, (u, v) in pairs.items():
+            au, auv = pr.A(u), pr.A(u + v)
+            self.rows.append(dict(directions=name, additivity=float(
+                np.linalg.norm(auv - au - pr.A(v)) / np.linalg.norm(auv)),
+                odd_symmetry=float(np.linalg.norm(pr.A(-u) + au) / np.linalg.norm(au))))
+        self.newton = [pr.newton_step(self.p["krylov"], coarse) for coarse in (False, True)]
+        sim._restore(snap)
+        R.place_rigid_nodes(sim.dyn)
+
+
+def main(argv=None):
+    params = common.start(DEFAULTS, __doc__, argv)
+    from dr_masonry.cli import import_case
+    from dr_masonry.scene import scene_params
+    mod = import_case(params["scene"])
+    out = os.path.join(common.OUT, "newton_krylov_run")
+    run = scene_params(mod.PARAMS, getattr(mod, "FAST", None), [f"out={out}", "maps="], mod.__doc__)
+    run["progress"] = False
+    sim, stages = mod.build(run)
+    mon = Monitor(params)
+    sim.monitors.append(mon)
+    try:
+        sim.run(stages)
+    except _Done:
+        pass
+    if mon.rows is None:
+        raise SystemExit(f"row {params['row']} converged before {params['at']} iterations: "
+                         f"nothing probed (a smaller at= probes it)")
+    total = int(sim.history["iterations"][-1])
+    common.report(mon.rows, "newton_krylov_derivatives",
+                  f"finite-difference derivatives at row {params['row']} (h = {params['h']:g})")
+    common.report(mon.newton, "newton_krylov_step",
+                  f"one Newton step; the relaxation finished the row in {total - mon.frozen_at:,} "
+                  f"more iterations ({total:,} in all)")
+
+
+if __name__ == "__main__":
+    main()
