@@ -4,7 +4,8 @@ matrix-free Newton-Krylov step do there? (BENCHMARKS.md section 52)
 Runs scene ``scene`` (default: the main job, S5 coarse mesh) to row ``row`` and, once its
 relaxation has run ``at`` iterations (at the end of the compiled call that passes them), freezes
 the state and probes the out-of-balance force F(x) of the free DOFs x (nodes and reference points;
-the trial state of an increment is a function of the displacements alone):
+the trial state of an increment is a function of the displacements alone; scenes under indirect
+control, whose load factor is an unknown too, are refused):
 
 * the contact points that damage or slide in the trial state;
 * finite-difference directional derivatives A(v) = -(F(x + h v) - F(x)) / h, h scaled so that
@@ -17,7 +18,8 @@ the trial state of an increment is a function of the displacements alone):
   answer, and the residual ratio after a backtracking line search (each product is one force
   evaluation, the cost of about one relaxation iteration);
 
-then lets the relaxation finish the row from the frozen state and reports its iterations. Run:
+then lets the relaxation finish the row from the frozen state and reports its iterations (with
+those of the attempts it cut, if the stall rule cut the probed one). Run:
 ``NUMBA_NUM_THREADS=1 python benchmarks/newton_krylov.py [scene=squat_wall row=17 at=2000
 krylov=200 h=1e-8]`` (about 30 s); writes ``benchmarks/out/newton_krylov*.csv``.
 """
@@ -60,6 +62,7 @@ class Probe:
         return np.concatenate([nodal[self.nm], rp[self.rm]])
 
     def unpack(self, v):
+        """Nodal (n, 3) and reference-point (nr, 6) arrays of a free-DOF vector ``v`` (m,)."""
         nodal = np.zeros(self.nm.shape)
         rp = np.zeros(self.rm.shape)
         k = int(self.nm.sum())
@@ -177,12 +180,19 @@ class Monitor:
 def main(argv=None):
     params = common.start(DEFAULTS, __doc__, argv)
     from dr_masonry.cli import import_case
+    from dr_masonry.loading import Indirect
+    from dr_masonry.params import ParameterError
     from dr_masonry.scene import scene_params
     mod = import_case(params["scene"])
     out = os.path.join(common.OUT, "newton_krylov_run")
     run = scene_params(mod.PARAMS, getattr(mod, "FAST", None), [f"out={out}", "maps="], mod.__doc__)
     run["progress"] = False
     sim, stages = mod.build(run)
+    if any(isinstance(c, Indirect) for st in stages for c in st.controls):
+        raise ParameterError(f"parameter scene={params['scene']!r}: the scene loads by indirect "
+                             f"control, whose load factor is an unknown of the increment; the "
+                             f"probe holds it fixed, which is another problem: probe a "
+                             f"displacement-controlled scene (squat_wall, slender_wall)")
     mon = Monitor(params)
     sim.monitors.append(mon)
     try:
@@ -192,12 +202,15 @@ def main(argv=None):
     if mon.rows is None:
         raise SystemExit(f"row {params['row']} converged before {params['at']} iterations: "
                          f"nothing probed (a smaller at= probes it)")
-    total = int(sim.history["iterations"][-1])
+    cut = int(sim.history["cut_iterations"][-1])   # the probed attempt, when it was cut
+    total = int(sim.history["iterations"][-1]) + cut
+    what = (f"committed the first part of the row ({cut:,} iterations in the attempts it cut)"
+            if cut else "finished the row")
     common.report(mon.rows, "newton_krylov_derivatives",
                   f"finite-difference derivatives at row {params['row']} (h = {params['h']:g})")
     common.report(mon.newton, "newton_krylov_step",
-                  f"one Newton step; the relaxation finished the row in {total - mon.frozen_at:,} "
-                  f"more iterations ({total:,} in all)")
+                  f"one Newton step; the relaxation {what} {total - mon.frozen_at:,} iterations "
+                  f"later ({total:,} in all)")
 
 
 if __name__ == "__main__":
