@@ -4,6 +4,7 @@
 ``study <case> [--vary key=v1,v2 ...] [--set key=value ...]``  a parameter study through Dask
 ``vtk <result.h5> [out_dir]``   write the VTK time series (.vtu + .pvd)
 ``info <result.h5> [--peak KEY ...]``  model size, configuration, increments, frames, last row
+``pack <result.h5> <copy.h5> [--frames ...]``  a compressed copy a run can be continued from
 ``list``                        the cases available
 
 Case scripts parse their ``key=value`` arguments with :func:`dr_masonry.params.parse_overrides`.
@@ -122,6 +123,23 @@ def _cmd_info(args):
             v = r.history[k]
             i, j = int(np.argmax(v)), int(np.argmin(v))
             print(f"peak {k}: max {v[i]:.6g} (row {i + 1}), min {v[j]:.6g} (row {j + 1})")
+    return 0
+
+
+def _cmd_pack(args):
+    from .results import pack
+    frames = args.frames
+    if frames != ["all"]:
+        try:
+            frames = [int(i) for i in frames]
+        except ValueError:
+            raise ParameterError(f"pack --frames {' '.join(frames)}: give increments (integers) "
+                                 f"or 'all'") from None
+    else:
+        frames = "all"
+    size, packed = pack(args.result, args.copy, frames)
+    print(f"{args.copy}: {packed / 2**20:.2f} MiB ({args.result}: {size / 2**20:.2f} MiB); "
+          f"continue the run with out={os.path.splitext(args.copy)[0]} resume=true")
     return 0
 
 
@@ -255,6 +273,18 @@ def _parser():
     s.add_argument("--peak", nargs="*", default=[], metavar="KEY",
                    help="history columns to report max/min of (default all)")
     s.set_defaults(func=_cmd_info)
+    s = sub.add_parser("pack", help="compressed copy of a results file (history, last "
+                       "checkpoint, chosen frames) that a run can be continued from",
+                       description="Copy a results file with its datasets compressed: the "
+                       "configuration, model, history and last checkpoint, and only the frames "
+                       "named by --frames. A run continues from the copy as from the file "
+                       "(resume=true, out naming the copy): the way to carry a long run to "
+                       "another machine.")
+    s.add_argument("result")
+    s.add_argument("copy")
+    s.add_argument("--frames", nargs="*", default=[], metavar="INCREMENT",
+                   help="increments of the frames to keep, or 'all' (default: none)")
+    s.set_defaults(func=_cmd_pack)
     s = sub.add_parser("list", help="list the cases")
     s.set_defaults(func=_cmd_list)
     return p

@@ -268,3 +268,21 @@ def test_warnings_print_as_one_line_naming_the_command():
                           timeout=120)
     assert proc.returncode == 0, proc.stderr
     assert proc.stderr == "squat_wall.py: UserWarning: increment 3: energy balance 2.1 %\n"
+
+
+def test_pack_command(tmp_path, capsys):
+    """``pack`` writes the copy and says how to continue from it; bad frames and a file without
+    a checkpoint are named, exit status 2."""
+    import numpy as np
+    from dr_masonry.results import ResultWriter, open_result
+    p, q = tmp_path / "r.h5", tmp_path / "c.h5"
+    write_fake_result(p)
+    assert main(["pack", str(p), str(q)]) == 2
+    assert "has no checkpoint" in capsys.readouterr().err
+    with ResultWriter(p, None, {}, mode="a") as w:
+        w.write_checkpoint(4, {"U": np.zeros((24, 3))}, {})
+    assert main(["pack", str(p), str(q), "--frames", "two"]) == 2
+    assert "pack --frames two: give increments (integers) or 'all'" in capsys.readouterr().err
+    assert main(["pack", str(p), str(q), "--frames", "0", "4"]) == 0
+    assert f"continue the run with out={tmp_path / 'c'} resume=true" in capsys.readouterr().out
+    assert open_result(q).frame_ids == [0, 4]

@@ -339,3 +339,45 @@ def test_an_existing_file_that_is_not_a_results_file_is_not_overwritten(tmp_path
     write_fake_result(tmp_path / "r.h5")
     write_fake_result(tmp_path / "r.h5", n_rows=2)     # a results file: a new run replaces it
     assert open_result(tmp_path / "r.h5").n_history == 2
+
+
+def test_pack_keeps_history_checkpoint_and_chosen_frames(tmp_path):
+    """``pack``: a compressed copy with the history (still appendable), the last checkpoint and
+    the chosen frames, equal to the file's; no checkpoint, a missing frame or the file itself as
+    the copy are refused with the reason."""
+    from dr_masonry.results import pack
+    p, q = tmp_path / "r.h5", tmp_path / "copy.h5"
+    m, cfg = write_fake_result(p)
+    with pytest.raises(ResultsError, match="has no checkpoint"):
+        pack(p, q)
+    U = np.tile(np.linspace(0.0, 1e-3, 24)[:, None], (1, 3))   # compressible, not constant
+    with ResultWriter(p, None, {}, mode="a") as w:
+        w.write_checkpoint(4, {"U": U, "lam": np.array([0.5])}, {"stage": [0, 4]}, keep=True)
+    with pytest.raises(ResultsError, match=r"no frame of increment\(s\) \[3\]; its frames are "
+                       r"of increments \[0, 2, 4\]"):
+        pack(p, q, frames=[2, 3])
+    with pytest.raises(ResultsError, match="written over itself"):
+        pack(p, str(p))
+    assert not q.exists() and not os.path.exists(str(q) + ".part")
+    pack(p, q, frames=[2])
+    r, c = open_result(p), open_result(q)
+    assert c.frame_ids == [2] and c.kept_checkpoints == [] and r.kept_checkpoints == [4]
+    assert c.config == cfg and c.attrs == r.attrs
+    for k in r.history:
+        np.testing.assert_array_equal(c.history[k], r.history[k], err_msg=k)
+    for k, v in r.model_arrays.items():
+        if k != "contacts":
+            np.testing.assert_array_equal(c.model_arrays[k], v, err_msg=k)
+    for k, v in fake_fields(m, 2).items():
+        np.testing.assert_array_equal(c.frame(0)[k], v, err_msg=k)
+    (i, arrays, meta), (i0, arrays0, meta0) = c.checkpoint(), r.checkpoint()
+    assert (i, meta) == (i0, meta0) == (4, {"stage": [0, 4]})
+    assert set(arrays) == set(arrays0) and np.array_equal(arrays["U"], U)
+    with h5py.File(q, "r") as f:
+        assert f["checkpoint/U"].compression == "gzip"
+        assert f["history/force"].maxshape == (None,)
+    with ResultWriter(q, None, {}, mode="a") as w:   # a continued run appends its rows
+        w.append_history({"increment": 5, "disp": 5e-4, "force": 1.0})
+    assert open_result(q).n_history == 6
+    pack(p, q, frames="all")
+    assert open_result(q).frame_ids == [0, 2, 4]

@@ -379,6 +379,33 @@ def test_interrupted_run_resumes(tmp_path, monkeypatch, squat):
     assert open_result(params["h5"]).n_history == whole["increment"].size
 
 
+def test_a_packed_copy_resumes_as_its_file(tmp_path, monkeypatch):
+    """A run interrupted in its push stage, packed (``dr-masonry pack``: compressed, one frame)
+    and continued from the copy ends with the rows of the run continued from the file itself, bit
+    for bit: the copy carries all a restart needs (a run longer than a machine's session)."""
+    from dr_masonry.cli import main
+    from dr_masonry.solver import Simulation
+    params = dict(tiny(squat_wall), h5=str(tmp_path / "s5.h5"), frames=1)
+    commit = Simulation._commit
+    interrupt_after(monkeypatch, 9)
+    with pytest.raises(KeyboardInterrupt):
+        squat_wall.run(params)
+    monkeypatch.setattr(Simulation, "_commit", commit)
+    copy = str(tmp_path / "copy.h5")
+    assert main(["pack", params["h5"], copy, "--frames", "4"]) == 0
+    assert open_result(copy).frame_ids == [4]
+    assert os.path.getsize(copy) < 0.5 * os.path.getsize(params["h5"])
+    hists = []
+    for h5 in (params["h5"], copy):
+        sim, hist, _ = squat_wall.run(dict(params, h5=h5, resume=True))
+        sim.close()
+        hists.append(hist)
+    assert hists[0]["increment"].size > 9
+    for k, v in hists[0].items():
+        if not k.endswith("_s"):   # time_s, cut_s: seconds, not results
+            np.testing.assert_array_equal(hists[1][k], v, err_msg=k)
+
+
 def test_replot_draws_a_stopped_run_without_running(tmp_path, monkeypatch):
     """``replot=true`` writes the curve, CSV (the stored rows) and VTK of a run stopped part way,
     runs nothing, and leaves the file as it was; it refuses resume=true, changed parameters and
