@@ -18,6 +18,7 @@ import dataclasses
 import json
 import os
 import shutil
+import subprocess
 import time
 import warnings
 from importlib import metadata
@@ -100,11 +101,31 @@ def require_space(path, nbytes, what, then):
 
 
 def code_version():
-    """Installed version of dr_masonry ("unknown" when it is not installed)."""
+    """Installed version of dr_masonry ("unknown" when it is not installed), with the git
+    revision of the source tree when it runs from a checkout of its own repository (an editable
+    install): "0.1.0+g5e9e6a8", "+g5e9e6a8.dirty" with uncommitted changes. A run continued over
+    several sessions records each restart's code this way (``/config`` attribute ``restarts``)."""
     try:
-        return metadata.version("dr_masonry")
+        version = metadata.version("dr_masonry")
     except metadata.PackageNotFoundError:
-        return "unknown"
+        version = "unknown"
+    rev = _git_revision(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    return f"{version}+g{rev}" if rev else version
+
+
+def _git_revision(root):
+    """Short revision (".dirty" appended with uncommitted changes) of the git work tree whose top
+    folder is ``root``; "" when ``root`` is not one (an installed copy, no git)."""
+    def git(*args):
+        return subprocess.run(["git", "-C", root, *args], capture_output=True, text=True,
+                              timeout=10, check=True).stdout.strip()
+    try:
+        if os.path.realpath(git("rev-parse", "--show-toplevel")) != os.path.realpath(root):
+            return ""   # installed inside some other repository
+        rev = git("rev-parse", "--short=7", "HEAD")
+        return rev + (".dirty" if git("status", "--porcelain", "--untracked-files=no") else "")
+    except (OSError, subprocess.SubprocessError):
+        return ""
 
 
 def _describe(obj):

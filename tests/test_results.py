@@ -381,3 +381,27 @@ def test_pack_keeps_history_checkpoint_and_chosen_frames(tmp_path):
     assert open_result(q).n_history == 6
     pack(p, q, frames="all")
     assert open_result(q).frame_ids == [0, 2, 4]
+
+
+def test_git_revision_of_a_checkout(tmp_path):
+    """The revision recorded with a run: a repository's short HEAD, ``.dirty`` with uncommitted
+    changes to tracked files; nothing for a folder that is not the top of a work tree."""
+    from dr_masonry.results import _git_revision, code_version
+    assert _git_revision(str(tmp_path)) == ""            # no repository
+    git = ["git", "-C", str(tmp_path), "-c", "user.name=t", "-c", "user.email=t@example.org"]
+    subprocess.run(git + ["init", "-q"], check=True)
+    assert _git_revision(str(tmp_path)) == ""            # no commit yet
+    (tmp_path / "a.txt").write_text("1")
+    (tmp_path / "sub").mkdir()
+    subprocess.run(git + ["add", "a.txt"], check=True)
+    subprocess.run(git + ["commit", "-q", "-m", "one"], check=True)
+    head = subprocess.run(git + ["rev-parse", "--short=7", "HEAD"], check=True,
+                          capture_output=True, text=True).stdout.strip()
+    assert _git_revision(str(tmp_path)) == head
+    (tmp_path / "new.txt").write_text("untracked: not a change of the code run")
+    assert _git_revision(str(tmp_path)) == head
+    (tmp_path / "a.txt").write_text("2")
+    assert _git_revision(str(tmp_path)) == head + ".dirty"
+    assert _git_revision(str(tmp_path / "sub")) == ""    # inside a repository, not its top
+    from importlib import metadata
+    assert code_version().startswith(metadata.version("dr_masonry"))
