@@ -453,11 +453,8 @@ def pack(src, dst, frames=()):
         raise ResultsError(f"pack: {src} would be written over itself; give another output file")
     part = dst + ".part"
     with _reading(src) as f:
-        if CHECKPOINT in f:
-            ck = f[CHECKPOINT]
-        elif CHECKPOINT_NEW in f and f[CHECKPOINT_NEW].attrs.get("complete", False):
-            ck = f[CHECKPOINT_NEW]
-        else:
+        ck = _last_checkpoint(f)
+        if ck is None:
             raise ResultsError(f"pack: {src} has no checkpoint, so no run could continue from a "
                                f"copy (a frame or a checkpoint_s interval writes one)")
         ids = sorted(int(k) for k in f["frames"])
@@ -467,18 +464,33 @@ def pack(src, dst, frames=()):
             raise ResultsError(f"pack: {src} has no frame of increment(s) {missing}; its frames "
                                f"are of increments {ids or 'none'}")
         require_space(part, os.path.getsize(src), "the packed copy", "free disk space")
-        with h5py.File(part, "w", libver=LIBVER) as g:
-            _copy_attrs(f, g)
-            for name in ("config", "model", "history"):
-                _copy_packed(f[name], g.create_group(name))
-            frames_out = g.create_group("frames")
-            _copy_attrs(f["frames"], frames_out)
-            for i in keep:
-                _copy_packed(f["frames"][_frame_name(i)],
-                             frames_out.create_group(_frame_name(i)))
-            _copy_packed(ck, g.create_group(CHECKPOINT))
+        try:
+            with h5py.File(part, "w", libver=LIBVER) as g:
+                _copy_attrs(f, g)
+                for name in ("config", "model", "history"):
+                    _copy_packed(f[name], g.create_group(name))
+                frames_out = g.create_group("frames")
+                _copy_attrs(f["frames"], frames_out)
+                for i in keep:
+                    _copy_packed(f["frames"][_frame_name(i)],
+                                 frames_out.create_group(_frame_name(i)))
+                _copy_packed(ck, g.create_group(CHECKPOINT))
+        except BaseException:
+            if os.path.exists(part):
+                os.remove(part)
+            raise
     os.replace(part, dst)
     return os.path.getsize(src), os.path.getsize(dst)
+
+
+def _last_checkpoint(f):
+    """The open file's ``/checkpoint`` group, or a complete ``/checkpoint_new`` (a process killed
+    between removing the old one and renaming the new one), or None."""
+    if CHECKPOINT in f:
+        return f[CHECKPOINT]
+    if CHECKPOINT_NEW in f and f[CHECKPOINT_NEW].attrs.get("complete", False):
+        return f[CHECKPOINT_NEW]
+    return None
 
 
 def _copy_attrs(a, b):
@@ -795,10 +807,9 @@ class Result:
     def _checkpoint_group(self, f):
         """The open file's ``/checkpoint`` group (or a complete ``/checkpoint_new``: a process
         killed between removing the old one and renaming the new one); ResultsError if none."""
-        if CHECKPOINT in f:
-            return f[CHECKPOINT]
-        if CHECKPOINT_NEW in f and f[CHECKPOINT_NEW].attrs.get("complete", False):
-            return f[CHECKPOINT_NEW]
+        ck = _last_checkpoint(f)
+        if ck is not None:
+            return ck
         raise ResultsError(f"{self.path} has no checkpoint (written with every frame)")
 
     @property

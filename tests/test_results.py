@@ -341,7 +341,7 @@ def test_an_existing_file_that_is_not_a_results_file_is_not_overwritten(tmp_path
     assert open_result(tmp_path / "r.h5").n_history == 2
 
 
-def test_pack_keeps_history_checkpoint_and_chosen_frames(tmp_path):
+def test_pack_keeps_history_checkpoint_and_chosen_frames(tmp_path, monkeypatch):
     """``pack``: a compressed copy with the history (still appendable), the last checkpoint and
     the chosen frames, equal to the file's; no checkpoint, a missing frame or the file itself as
     the copy are refused with the reason."""
@@ -381,6 +381,14 @@ def test_pack_keeps_history_checkpoint_and_chosen_frames(tmp_path):
     assert open_result(q).n_history == 6
     pack(p, q, frames="all")
     assert open_result(q).frame_ids == [0, 2, 4]
+    import dr_masonry.results as results
+
+    def full_disk(a, b):
+        raise OSError(28, "No space left on device")
+    monkeypatch.setattr(results, "_copy_packed", full_disk)
+    with pytest.raises(OSError, match="No space left"):
+        pack(p, tmp_path / "failed.h5")
+    assert not list(tmp_path.glob("failed.h5*"))   # no copy, no partial file left
 
 
 def test_git_revision_of_a_checkout(tmp_path):
