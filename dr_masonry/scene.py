@@ -1,11 +1,12 @@
 """What every scene script does around its run: parse its parameters, summarise the solver's
 work, close the result and write the curve (PNG + CSV) and VTK."""
 import os
+import warnings
 
 import numpy as np
 
 from .params import ParameterError, output_path, parse_overrides, with_preset
-from .results import make_folder
+from .results import make_folder, open_result
 from .solver import SolverError
 from .units import kN, mm
 
@@ -336,5 +337,11 @@ def finish(sim, out, x, y, xlabel, ylabel, title, reference=None, vtk=True, cycl
         paths += [out + "_cycles.csv", cycle_energy_plot(cycles, out + "_cycles.png", title)]
     if vtk and sim.output is not None:
         from .viz.vtk_series import export_vtk
-        paths.append(export_vtk(sim.output, out + "_vtk"))
+        n_frames = open_result(sim.output).n_frames
+        if n_frames:
+            paths.append(export_vtk(sim.output, out + "_vtk"))
+        else:   # a packed copy keeps only the frames named at packing
+            warnings.warn(f"{sim.output} has no frames: no VTK written (`dr-masonry pack "
+                          f"--frames` keeps frames in a packed copy)", RuntimeWarning,
+                          stacklevel=2)
     return paths

@@ -14,7 +14,7 @@ from dr_masonry.loading import LoadingError
 from dr_masonry.params import ParameterError
 from dr_masonry.postprocess import PostprocessError, cycle_bounds, energy_per_cycle
 from dr_masonry.protocols import S4, S5, S6, S7
-from dr_masonry.results import open_result
+from dr_masonry.results import open_result, pack
 from dr_masonry.viz.plots import crack_map
 from interrupt import interrupt_after
 
@@ -416,6 +416,11 @@ def test_replot_draws_a_stopped_run_without_running(tmp_path, monkeypatch):
     vtu = sorted(p.name for p in (tmp_path / "s5_vtk").glob("blocks_*.vtu"))
     assert vtu == [f"blocks_{i:06d}.vtu" for i in r.frame_ids] and len(vtu) >= 2
     assert open_result(str(out) + ".h5").n_history == 5   # untouched
+    copy = tmp_path / "copy"       # a packed copy keeps no frames: the curve, no VTK
+    pack(str(out) + ".h5", str(copy) + ".h5")
+    with pytest.warns(RuntimeWarning, match=r"copy\.h5 has no frames: no VTK written"):
+        squat_wall.main(argv[:3] + [f"out={copy}", "frames=2", "replot=true"])
+    assert os.path.getsize(str(copy) + ".png") > 0 and not (tmp_path / "copy_vtk").exists()
     with pytest.raises(ParameterError, match="replot=true and resume=true"):
         squat_wall.main(argv + ["replot=true", "resume=true"])
     with pytest.raises(ParameterError, match=r"replot=true: .*s5\.h5 was run with drift=0\.03"):
