@@ -17,6 +17,15 @@ from dr_masonry.results import CHECKPOINT_NEW, ResultWriter, open_result
 from test_results import write_fake_result
 
 
+@pytest.fixture(autouse=True)
+def _sigint_raises():
+    """SIGINT raises KeyboardInterrupt here even where pytest was started in the background,
+    which ignores it (and :mod:`dr_masonry.interrupts` leaves an ignored signal ignored)."""
+    old = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, old)
+
+
 def _signal_self(sig):
     os.kill(os.getpid(), sig)
     time.sleep(0.01)   # the handler runs at the next bytecode after delivery
@@ -192,3 +201,11 @@ def test_nested_uninterrupted_blocks_raise_at_the_outer_end():
                 _signal_self(signal.SIGINT)
             done.append(1)   # the inner block's end hands the signal on, it does not raise
     assert done == [1] and signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def test_an_ignored_sigint_stays_ignored():
+    """A job started in the background ignores SIGINT: held blocks leave it so, raising nothing."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    with uninterrupted():
+        _signal_self(signal.SIGINT)
+    assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
