@@ -41,8 +41,9 @@ from dr_masonry.materials.joint import KC_PEN_FACTOR
 from dr_masonry.model import quad_area_vector
 from dr_masonry.postprocess import cycle_text, energy_per_cycle
 from dr_masonry.protocols import S6, turning_points
-from dr_masonry.scene import (RUN_PARAMS, choice, compare_curve, finish, peaks_text, run_stages,
-                              scene_params, solver_summary, write_maps)
+from dr_masonry.scene import (RUN_PARAMS, at_floor, choice, compare_curve, equilibrium_text,
+                              finish, peaks_text, run_stages, scene_params, solver_summary,
+                              write_maps)
 from dr_masonry.units import MPa, kN, mm
 
 PARAMS = dict(
@@ -75,8 +76,9 @@ CURVE = dict(x="centre.uy", y="lambda", stage="push", xscale=1e3, yscale=1e-3,
 
 
 def build(params):
-    """Model and stages. Sets ``sim.wall``, ``sim.centre`` (node set of the control node) and
-    ``sim.loaded_area`` (m^2, area of the pressurised face)."""
+    """Model and stages. Sets ``sim.wall``, ``sim.centre`` (node set of the control node),
+    ``sim.airbag`` (the pressure's load pattern) and ``sim.loaded_area`` (m^2, area of the
+    pressurised face)."""
     kind = choice(params, "protocol", ("monotonic", "cyclic"))
     sim, wall, beam, base, pre = squat_wall.rig(params, JointLaw.reference(),
                                                 PlasticDamage.reference())
@@ -106,7 +108,7 @@ def build(params):
               Stage("push", path.size, [Indirect(pattern=airbag, target=sim.centre, dof="y",
                                                  path=path, name="airbag")],
                     frames=params["frames"], frame_at=turning_points(path))]
-    sim.wall = wall
+    sim.wall, sim.airbag = wall, airbag
     return sim, stages
 
 
@@ -124,7 +126,19 @@ def report(sim, hist, push):
     displacement, and as a pressure; damage, iterations per increment."""
     u, F = curve(hist, push)
     return (f"peak lateral force {peaks_text(u, F)} centre displacement (pressure "
-            f"{peaks_text(u, F / sim.loaded_area, 1e3, 'kPa')}); " + solver_summary(hist, push))
+            f"{peaks_text(u, F / sim.loaded_area, 1e3, 'kPa')}); "
+            f"{equilibrium_text(F, support_reaction(sim, hist, push), at_floor(sim, hist, push))}"
+            "; "
+            + solver_summary(hist, push))
+
+
+def support_reaction(sim, hist, rows):
+    """The out-of-plane reaction of the held edges, the top beam and the foundation (N) that
+    balances the lateral force of the history rows ``rows``, less the airbag's pressure on the
+    held edge nodes (node-set reactions leave out the load on their own nodes)."""
+    P = sim.pattern_forces(sim.airbag)[0]
+    direct = hist["lambda"][rows] * P[sim.node_sets["edges"].nodes, 1].sum()
+    return -(hist["edges.fy"][rows] + hist["beam.fy"][rows] + hist["base.fy"][rows]) + direct
 
 
 def curve(hist, rows):
@@ -142,6 +156,7 @@ def main(argv=None):
     finish(sim, params["out"], x=x / mm, y=y / kN, xlabel="centre displacement (mm)",
            ylabel="lateral force (kN)", title=f"S6 out-of-plane wall, {params['protocol']}",
            cycles=cycles, label=f"this run ({params['protocol']})",
+           reaction=support_reaction(sim, hist, push) / kN, floor=at_floor(sim, hist, push),
            reference=compare_curve(params, "pre_increments", curve))
     write_maps(sim, params, params["out"], squat_wall.MAPS, x, y, push)
     print(report(sim, hist, push))

@@ -48,9 +48,9 @@ from dr_masonry.materials.joint import KC_PEN_FACTOR
 from dr_masonry.params import ParameterError
 from dr_masonry.postprocess import cycle_text, energy_per_cycle
 from dr_masonry.protocols import S5, turning_points
-from dr_masonry.scene import (RUN_PARAMS, choice, compare_curve, finish, peaks_text, run_stages,
-                              scene_params, solver_options, solver_summary, with_penalty,
-                              write_maps)
+from dr_masonry.scene import (RUN_PARAMS, at_floor, choice, compare_curve, equilibrium_text,
+                              finish, peaks_text, run_stages, scene_params, solver_options,
+                              solver_summary, with_penalty, write_maps)
 from dr_masonry.units import MPa, kN, mm
 
 PARAMS = dict(
@@ -200,12 +200,20 @@ def report(sim, hist, push):
     """One-line summary: peak base shear (both directions' in a cyclic run) at its top
     displacement, damage, iterations per increment."""
     u, V = curve(hist, push)
-    return f"peak base shear {peaks_text(u, V)} top displacement; " + solver_summary(hist, push)
+    return (f"peak base shear {peaks_text(u, V)} top displacement; "
+            f"{equilibrium_text(V, base_reaction(hist, push), at_floor(sim, hist, push))}; "
+            + solver_summary(hist, push))
 
 
 def curve(hist, rows):
     """Top displacement and base shear (m, N) of the history rows ``rows``."""
     return hist["beam.ux"][rows], hist["beam.fx"][rows]
+
+
+def base_reaction(hist, rows):
+    """The foundation's horizontal reaction that balances the base shear (N) of the history
+    rows ``rows``."""
+    return -hist["base.fx"][rows]
 
 
 #: crack maps of the wall's elevation: joint damage with block tensile, and with compressive damage
@@ -223,6 +231,7 @@ def main(argv=None, doc=__doc__, defaults=PARAMS, protocol=S5, title="S5 squat w
            ylabel="base shear (kN)",
            title=f"{title}, {params['protocol']}, {params['bc']}, {params['variant']}",
            cycles=cycles, label=f"this run ({params['protocol']})",
+           reaction=base_reaction(hist, push) / kN, floor=at_floor(sim, hist, push),
            reference=compare_curve(params, "pre_increments", curve))
     write_maps(sim, params, params["out"], MAPS, x, y, push)
     print(report(sim, hist, push))

@@ -48,9 +48,9 @@ from dr_masonry.loading import Gravity
 from dr_masonry.materials.joint import KC_PEN_FACTOR
 from dr_masonry.postprocess import cycle_text, energy_per_cycle
 from dr_masonry.protocols import S7, turning_points
-from dr_masonry.scene import (RUN_PARAMS, choice, compare_curve, finish, peaks_text, run_stages,
-                              scene_params, solver_options, solver_summary, with_penalty,
-                              write_maps)
+from dr_masonry.scene import (RUN_PARAMS, at_floor, choice, compare_curve, equilibrium_text,
+                              finish, peaks_text, run_stages, scene_params, solver_options,
+                              solver_summary, with_penalty, write_maps)
 from dr_masonry.units import kN, mm
 from dr_masonry.viz.plots import plot_history
 
@@ -152,6 +152,7 @@ def report(sim, hist, push):
     at its top displacement, damage, iterations per increment."""
     u, V = curve(hist, push, len(sim.floors))
     return (f"peak base shear (whole house) {peaks_text(u, V)} top displacement; "
+            f"{equilibrium_text(V, base_reaction(hist, push), at_floor(sim, hist, push))}; "
             + solver_summary(hist, push))
 
 
@@ -159,6 +160,12 @@ def curve(hist, rows, floors=2):
     """Top-floor displacement and the whole house's base shear (m, N) of the history rows
     ``rows``: 2 x the half model's, whose floors' forces are each the load factor."""
     return hist[f"floor{floors}.ux"][rows], 2.0 * floors * hist["lambda"][rows]
+
+
+def base_reaction(hist, rows):
+    """The foundation's horizontal reaction that balances the base shear (N, whole house: 2 x
+    the half model's) of the history rows ``rows``."""
+    return -2.0 * hist["base.fx"][rows]
 
 
 def maps(sim):
@@ -183,7 +190,9 @@ def main(argv=None):
     finish(sim, out, x=x / mm, y=y / kN, xlabel="top displacement (mm)",
            ylabel="base shear, whole house (kN)",
            title=f"S7 terraced house, {params['protocol']}, direction {params['direction']:+d}",
-           cycles=cycles, label=f"this run ({params['protocol']})", reference=compare_curve(
+           cycles=cycles, label=f"this run ({params['protocol']})",
+           reaction=base_reaction(hist, push) / kN, floor=at_floor(sim, hist, push),
+           reference=compare_curve(
                params, "gravity_increments", lambda h, r: curve(h, r, len(sim.floors))))
     if sim.output is not None:   # Fig. 26: the load moves between the walls and the piers
         plot_history(sim.output, top, [f"{k}.fz" for k in REACTIONS], out + "_reactions.png",

@@ -166,6 +166,33 @@ def peaks_text(x, force, unit=kN, unit_name="kN"):
     return f"{force[k] / unit:.2f} {unit_name} at {x[k] / mm:.2f} mm"
 
 
+def equilibrium_text(force, reaction, at_floor, unit=kN, unit_name="kN"):
+    """How far a curve's force and the supports' reaction that should balance it part (N, one
+    of each per row), as one phrase: the largest and the median gap on the rows accepted at the
+    residual floor (``at_floor``, bool mask) and the largest on the converged rows. Their gap is
+    the resultant of the out-of-balance (inertia and damping) forces a row was left with: the
+    residual ratio, a norm over every node against loads dominated by gravity, can pass a
+    resultant of several per cent of a lateral load, so a row at the floor is only as exact as
+    this gap."""
+    gap = np.abs(np.asarray(force, dtype=float) - np.asarray(reaction, dtype=float))
+    at_floor = np.asarray(at_floor, dtype=bool)
+    parts = []
+    if at_floor.any():
+        g = gap[at_floor]
+        parts.append(f"at most {g.max() / unit:.2f} {unit_name} (median {np.median(g) / unit:.2f})"
+                     f" on the {g.size} rows accepted at the residual floor")
+    if (~at_floor).any():
+        parts.append(f"at most {gap[~at_floor].max() / unit:.2f} {unit_name} on the "
+                     f"{int((~at_floor).sum())} converged rows")
+    return "force and support reaction part by " + ", ".join(parts) if parts else "no row"
+
+
+def at_floor(sim, hist, rows):
+    """Bool mask of the history rows ``rows`` accepted above the solver's tolerance (at the
+    residual floor, ``SolverOptions.floor_tol``)."""
+    return np.asarray(hist["residual"])[rows] > sim.options.tol
+
+
 def solver_summary(hist, rows):
     """Damage maxima at the end, iterations per increment over ``rows`` (bool mask), the
     relaxation time of a run's history and the work lost in attempts that were cut, as one
@@ -302,8 +329,11 @@ def compare_curve(params, first_stage, curve, xscale=1.0 / mm, yscale=1.0 / kN):
 
 
 def finish(sim, out, x, y, xlabel, ylabel, title, reference=None, vtk=True, cycles=None,
-           label="dr_masonry"):
-    """Write ``out.png`` (curve ``label``, optional reference (x, y, label)), ``out.csv``,
+           label="dr_masonry", reaction=None, floor=None):
+    """Write ``out.png`` (curve ``label``, optional reference (x, y, label) and, thin, the
+    supports' reaction ``reaction`` (y of the same x) that balances the curve's force: where the
+    two part, rows stopped short of equilibrium; the rows of bool mask ``floor``, accepted at
+    the residual floor, as open circles), ``out.csv``,
     ``out_vtk/`` and, for a cyclic run, ``out_cycles.csv`` and the bars of ``out_cycles.png``
     (``cycles``: the list of :func:`dr_masonry.postprocess.energy_per_cycle`; displacements m,
     forces N, energies J).
@@ -318,7 +348,12 @@ def finish(sim, out, x, y, xlabel, ylabel, title, reference=None, vtk=True, cycl
     ax = fig.subplots()
     if reference is not None:
         ax.plot(reference[0], reference[1], "k--", lw=1, label=reference[2])
-    ax.plot(x, y, "o-", ms=2, label=label)
+    line, = ax.plot(x, y, "o-", ms=2, label=label)
+    if floor is not None and np.any(floor):
+        ax.plot(np.asarray(x)[floor], np.asarray(y)[floor], "o", ms=4, mfc="none",
+                color=line.get_color(), label=f"{int(np.sum(floor))} rows at the residual floor")
+    if reaction is not None:
+        ax.plot(x, reaction, "-", color="0.6", lw=0.8, label="support reaction")
     ax.set(xlabel=xlabel, ylabel=ylabel, title=title)
     ax.grid(alpha=0.3)
     ax.legend()

@@ -606,7 +606,7 @@ class Simulation:
         self.coarse = None
 
     # ------------------------------------------------------------------ patterns
-    def _pattern(self, pat):
+    def pattern_forces(self, pat):
         """(P (n_nodes, 3) N, rpP (n_rp, 6)) of a load pattern per unit factor, cached by name."""
         known = self.patterns.get(pat.name)
         if known is not None:
@@ -648,7 +648,7 @@ class Simulation:
                 P[pat.target.nodes, k] = pat.value / pat.target.nodes.size
         elif isinstance(pat, L.Combined):
             for part, w in pat.parts:
-                p1, r1 = self._pattern(part)
+                p1, r1 = self.pattern_forces(part)
                 P += w * p1
                 rpP += w * r1
         else:
@@ -682,7 +682,7 @@ class Simulation:
                                          f"{ctl.dof} (a fixed block or Simulation.fix): a "
                                          f"non-zero prescribed displacement would move a support")
             if isinstance(ctl, L.Load):
-                P, rpP = self._pattern(ctl.pattern)
+                P, rpP = self.pattern_forces(ctl.pattern)
                 if not (np.any(P[~self._fixed]) or np.any(rpP)):
                     raise L.LoadingError(f"control {ctl.label}: pattern {ctl.pattern.name!r} "
                                          f"puts no force on any free DOF (its blocks, faces or "
@@ -736,7 +736,7 @@ class Simulation:
             d.rpfree[ctl.target.index, k] = 1.0
             self.rp_force[ctl.target.index, k] = value
         elif isinstance(ctl, L.Load):
-            self._pattern(ctl.pattern)
+            self.pattern_forces(ctl.pattern)
             self.factors[ctl.pattern.name] = value
 
     def _assemble_loads(self, indirect):
@@ -753,7 +753,7 @@ class Simulation:
             rpf_loads += fac * rpP
         d.rpf[:] = self.rp_force * d.rpfree + rpf_loads
         if indirect is not None:
-            P, rpP = self._pattern(indirect.pattern)
+            P, rpP = self.pattern_forces(indirect.pattern)
             d.P[:] = P
             d.rpP[:] = rpP
 
@@ -873,7 +873,7 @@ class Simulation:
                 indirect = ctl
                 if first == 0 and self.factors.get(ctl.pattern.name) is not None:
                     self.lam[0] = self.factors[ctl.pattern.name]
-                self._pattern(ctl.pattern)
+                self.pattern_forces(ctl.pattern)
         start_values = [[list(key), float(starts[key])] for key in targets]
         self.stage_name = stage.name
         for i in range(first, n):
@@ -1068,7 +1068,7 @@ class Simulation:
         """([kind, index, dof], pattern force on that DOF) of an indirect control."""
         t = indirect.target
         k = L.dof_index(indirect.dof, isinstance(t, L.RigidPoint))
-        P, rpP = self._pattern(indirect.pattern)
+        P, rpP = self.pattern_forces(indirect.pattern)
         if isinstance(t, L.RigidPoint):
             pc = rpP[t.index, k]
             if k < 3:

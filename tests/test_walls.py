@@ -285,6 +285,21 @@ def test_peaks_text():
     assert peaks_text(u[:0], u[:0]) == "no push row"
 
 
+def test_equilibrium_text():
+    """The gap between a curve's force and the reaction balancing it, split into the rows
+    accepted at the residual floor (largest and median) and the converged ones (largest)."""
+    from dr_masonry.scene import equilibrium_text
+    F = np.array([10e3, 20e3, 30e3, -10e3])
+    R = np.array([10.1e3, 23e3, 29e3, -14e3])
+    floor = np.array([False, True, True, True])
+    assert equilibrium_text(F, R, floor) == (
+        "force and support reaction part by at most 4.00 kN (median 3.00) on the 3 rows "
+        "accepted at the residual floor, at most 0.10 kN on the 1 converged rows")
+    assert equilibrium_text(F, F, ~floor | True).endswith("0.00 kN (median 0.00) on the 4 rows "
+                                                          "accepted at the residual floor")
+    assert equilibrium_text(F[:0], R[:0], floor[:0]) == "no row"
+
+
 def test_main_writes_outputs(tmp_path):
     """The CLI entry runs the fast preset and writes HDF5, CSV, PNG and VTK."""
     out = tmp_path / "s5"
