@@ -909,7 +909,7 @@ class Result:
         res = self.history.get("residual")
         if tol is None or res is None:
             return None, None
-        return tol, np.flatnonzero(np.asarray(res) > tol * (1.0 + 1e-9))
+        return tol, np.flatnonzero(above_tol(res, tol))
 
     def summary(self):
         """One-line description of the model size."""
@@ -917,6 +917,12 @@ class Result:
         nc = 0 if c is None else len(c["slave"])
         nb = len(self.model_arrays["block_divisions"])
         return size_summary(nb, self.sizes["element"], self.sizes["node"], nc)
+
+
+def above_tol(residual, tol):
+    """Bool mask of the history rows whose residual ratio ``residual`` (k,) is above the solver
+    tolerance ``tol`` (beyond round-off): the rows accepted at a residual floor."""
+    return np.asarray(residual) > tol * (1.0 + 1e-9)
 
 
 def open_result(path):

@@ -6,7 +6,7 @@ import warnings
 import numpy as np
 
 from .params import ParameterError, output_path, parse_overrides, with_preset
-from .results import make_folder, open_result
+from .results import above_tol, make_folder, open_result
 from .solver import SolverError
 from .units import kN, mm
 
@@ -190,7 +190,7 @@ def equilibrium_text(force, reaction, at_floor, unit=kN, unit_name="kN"):
 def at_floor(sim, hist, rows):
     """Bool mask of the history rows ``rows`` accepted above the solver's tolerance (at the
     residual floor, ``SolverOptions.floor_tol``)."""
-    return np.asarray(hist["residual"])[rows] > sim.options.tol
+    return above_tol(np.asarray(hist["residual"])[rows], sim.options.tol)
 
 
 def solver_summary(hist, rows):

@@ -295,7 +295,7 @@ def test_equilibrium_text():
     assert equilibrium_text(F, R, floor) == (
         "force and support reaction part by at most 4.00 kN (median 3.00) on the 3 rows "
         "accepted at the residual floor, at most 0.10 kN on the 1 converged rows")
-    assert equilibrium_text(F, F, ~floor | True).endswith("0.00 kN (median 0.00) on the 4 rows "
+    assert equilibrium_text(F, F, np.ones(4, bool)).endswith("0.00 kN (median 0.00) on the 4 rows "
                                                           "accepted at the residual floor")
     assert equilibrium_text(F[:0], R[:0], floor[:0]) == "no row"
 
