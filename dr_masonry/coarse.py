@@ -18,9 +18,10 @@ point (slave node against master point): secant where the point softens or slide
 trial state (tangentially: along its traction only), elastic unloading elsewhere. Dynamic
 relaxation then only has to remove what the affine blocks cannot represent, local and fast: a
 two-level method with relaxation as the smoother. The operator is factorised once per increment
-(sparse LU, symmetric ordering). A step is accepted only if it lowers the total potential energy
-of the trial state (halved twice before giving up; the out-of-balance norm is no guide, as a
-coarse motion leaves element-scale residuals); it changes trial states only, never the committed
+(sparse LU, symmetric ordering). A step is accepted only if it moves no node by more than a trust
+radius (:data:`TRUST`) and lowers the total potential energy of the trial state (halved twice
+before giving up; the out-of-balance norm is no guide, as a coarse motion leaves element-scale
+residuals); it changes trial states only, never the committed
 history, so it cannot damage anything the relaxation would not.
 
 Fixed blocks and blocks tied to reference points are not coarse unknowns (the latter move with
@@ -43,6 +44,12 @@ from .model import quad_normal
 
 #: coarse DOFs of a block (affine motion u = a + B (X - c)) and of a reference point (rigid)
 NB, NR = 12, 6
+#: the largest node motion of an accepted coarse step, in smallest block extents (median block):
+#: beyond it the contact pairs of the increment's start no longer describe the joints and the
+#: linear coarse model is not trusted; a nearly singular operator (a block or floor held only by
+#: sliding or cracked joints) otherwise gives steps of kilometres that still lower the potential
+#: (the joints open without cost while the loads work): S7 cyclic row 248, docs/validation.md
+TRUST = 0.25
 
 
 def affine_t(d):
@@ -96,6 +103,10 @@ class BlockCoarse:
         cnt = np.diff(self.start)
         self.centre = np.add.reduceat(X, self.start[:-1], axis=0) / cnt[:, None]  # (nb, 3) m
         self.fixed = np.asarray(m.block_fixed, dtype=bool)
+        # trust radius (m): a quarter of the median block's smallest extent
+        thin = (np.maximum.reduceat(X, self.start[:-1], axis=0)
+                - np.minimum.reduceat(X, self.start[:-1], axis=0)).min(axis=1)
+        self.trust = TRUST * float(np.median(thin[~self.fixed] if (~self.fixed).any() else thin))
         laws = m.joint_laws
         c = sim.cont
         self.kc_el = np.array([lw.kc_pen for lw in laws])[c.law] if c.slave.size else np.zeros(0)
@@ -365,7 +376,8 @@ class BlockCoarse:
 
     def correct(self, lam_arr, rpres, ctrl):
         """Apply one coarse correction to ``sim.dyn`` (after ``internal_forces`` and ``residual``
-        of the current state); returns True if it lowered the potential energy (else undone).
+        of the current state); returns True if it lowered the potential energy by a step within the
+        trust radius ``self.trust`` (m; else undone).
 
         The operator is factorised at the first correction of an increment and reused for the
         increment. Held node DOFs (supports, prescribed values) of coarse blocks are kept
@@ -407,6 +419,8 @@ class BlockCoarse:
             d.U[nodes] += step * du
             d.rpU[:] += step * drp
             R.place_rigid_nodes(d)
+            if np.abs(d.U - U0).max(initial=0.0) > self.trust:
+                continue
             if self.potential(lam_new) < pi0:
                 lam_arr[0] = lam_new
                 d.V[:] = 0.0

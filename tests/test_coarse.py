@@ -136,3 +136,30 @@ def test_joint_stiffness_secant_only_where_it_slides():
     assert e @ slide @ e == pytest.approx(2e5 / 1e-3 * area, rel=1e-12)
     across = np.cross(n, e)
     assert across @ slide @ across == pytest.approx(law.kss * area, rel=1e-12)
+
+
+def test_trust_radius_rejects_a_long_step():
+    """A coarse step that would move a node by more than the trust radius (a quarter of the
+    median block's smallest extent: 81 mm blocks, 20.25 mm) is undone, even where it lowers the
+    potential (a nearly singular operator lets a block held by sliding or cracked joints fly
+    kilometres: S7 cyclic row 248); the same step within the radius is taken."""
+    sim, _ = _loaded(None, True)
+    d = sim.dyn
+    R.internal_forces(sim.mesh, sim.cont, d)
+    R.residual(d, 0.0, np.zeros((0, 6)))
+    co = BlockCoarse(sim)
+    assert co.trust == pytest.approx(0.25 * 0.081, rel=1e-12)
+    assert co.correct(np.zeros(1), np.zeros((0, 6)), np.zeros(3, np.int64))
+    step = np.abs(d.U).max()
+    assert 0.0 < step < co.trust
+    sim, _ = _loaded(None, True)
+    d = sim.dyn
+    R.internal_forces(sim.mesh, sim.cont, d)
+    R.residual(d, 0.0, np.zeros((0, 6)))
+    co = BlockCoarse(sim)
+    co.trust = 0.2 * step      # the halved steps (1/2, 1/4) are still too long
+    assert not co.correct(np.zeros(1), np.zeros((0, 6)), np.zeros(3, np.int64))
+    assert not d.U.any()
+    co.trust = 0.3 * step      # a quarter step fits
+    assert co.correct(np.zeros(1), np.zeros((0, 6)), np.zeros(3, np.int64))
+    assert np.abs(d.U).max() == pytest.approx(0.25 * step, rel=1e-9)
