@@ -21,8 +21,8 @@ two-level method with relaxation as the smoother. The operator is factorised onc
 (sparse LU, symmetric ordering). A step is accepted only if it moves no node by more than a trust
 radius (:data:`TRUST`) and lowers the total potential energy of the trial state (halved twice
 before giving up; the out-of-balance norm is no guide, as a coarse motion leaves element-scale
-residuals); it changes trial states only, never the committed
-history, so it cannot damage anything the relaxation would not.
+residuals); it changes trial states only, never the committed history, so it cannot damage
+anything the relaxation would not.
 
 Fixed blocks and blocks tied to reference points are not coarse unknowns (the latter move with
 their reference point, whose free DOFs are); held node DOFs of the other blocks (supports,

@@ -74,6 +74,20 @@ def _loaded(kc, coarse):
     return sim, Stage("g", 1, [ctl])
 
 
+def _coarse_at_rest(kc):
+    """The loaded column of :func:`_loaded` at rest, its forces and residual computed, and its
+    coarse correction."""
+    sim, _ = _loaded(kc, True)
+    R.internal_forces(sim.mesh, sim.cont, sim.dyn)
+    R.residual(sim.dyn, 0.0, np.zeros((0, 6)))
+    return sim, BlockCoarse(sim)
+
+
+def _correct(co):
+    """One coarse correction without load-factor control (True if accepted)."""
+    return co.correct(np.zeros(1), np.zeros((0, 6)), np.zeros(3, np.int64))
+
+
 @pytest.mark.parametrize("kc", [None, 7.5e11])
 def test_one_correction_from_rest(kc):
     """One coarse correction from rest lands within 3 % of the converged displacement field
@@ -83,12 +97,9 @@ def test_one_correction_from_rest(kc):
     plain = Simulation(_column(30, kc), SolverOptions(tol=1e-5, coarse=False))
     hist = plain.run([Stage("g", 1, [Load(pattern=Gravity(), to=1000.0)])])
     exact = plain.dyn.U.copy()
-    sim, stage = _loaded(kc, True)
-    d = sim.dyn
-    R.internal_forces(sim.mesh, sim.cont, d)
-    R.residual(d, 0.0, np.zeros((0, 6)))
-    assert BlockCoarse(sim).correct(np.zeros(1), np.zeros((0, 6)), np.zeros(3, np.int64))
-    assert np.linalg.norm(d.U - exact) < 0.03 * np.linalg.norm(exact)
+    sim, co = _coarse_at_rest(kc)
+    assert _correct(co)
+    assert np.linalg.norm(sim.dyn.U - exact) < 0.03 * np.linalg.norm(exact)
     sim, stage = _loaded(kc, True)
     hist_c = sim.run([stage])
     assert np.abs(sim.dyn.U - exact).max() < 1e-3 * np.abs(exact).max()
@@ -143,23 +154,15 @@ def test_trust_radius_rejects_a_long_step():
     median block's smallest extent: 81 mm blocks, 20.25 mm) is undone, even where it lowers the
     potential (a nearly singular operator lets a block held by sliding or cracked joints fly
     kilometres: S7 cyclic row 248); the same step within the radius is taken."""
-    sim, _ = _loaded(None, True)
-    d = sim.dyn
-    R.internal_forces(sim.mesh, sim.cont, d)
-    R.residual(d, 0.0, np.zeros((0, 6)))
-    co = BlockCoarse(sim)
+    sim, co = _coarse_at_rest(None)
     assert co.trust == pytest.approx(0.25 * 0.081, rel=1e-12)
-    assert co.correct(np.zeros(1), np.zeros((0, 6)), np.zeros(3, np.int64))
-    step = np.abs(d.U).max()
+    assert _correct(co)
+    step = np.abs(sim.dyn.U).max()
     assert 0.0 < step < co.trust
-    sim, _ = _loaded(None, True)
-    d = sim.dyn
-    R.internal_forces(sim.mesh, sim.cont, d)
-    R.residual(d, 0.0, np.zeros((0, 6)))
-    co = BlockCoarse(sim)
+    sim, co = _coarse_at_rest(None)
     co.trust = 0.2 * step      # the halved steps (1/2, 1/4) are still too long
-    assert not co.correct(np.zeros(1), np.zeros((0, 6)), np.zeros(3, np.int64))
-    assert not d.U.any()
+    assert not _correct(co)
+    assert not sim.dyn.U.any()
     co.trust = 0.3 * step      # a quarter step fits
-    assert co.correct(np.zeros(1), np.zeros((0, 6)), np.zeros(3, np.int64))
-    assert np.abs(d.U).max() == pytest.approx(0.25 * step, rel=1e-9)
+    assert _correct(co)
+    assert np.abs(sim.dyn.U).max() == pytest.approx(0.25 * step, rel=1e-9)
