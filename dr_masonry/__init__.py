@@ -10,7 +10,8 @@ from .model import Model, ModelError
 from .materials import JointLaw, PlasticDamage
 from .loading import (Displacement, Force, Load, Indirect, Stage, Gravity, BodyForce,
                       Pressure, PointLoad, Combined, cyclic_path)
-from .solver import Simulation, SolverOptions, SolverError
+from .options import SolverOptions
+from .solver import Simulation, SolverError
 from .drivers_joint import drive_joint
 from .drivers_material import drive_material, drive_strain_path
 

@@ -67,7 +67,7 @@ def choice(params, key, options):
 def solver_options(params):
     """The :class:`SolverOptions` of a scene: its ``OPTION_KEYS`` parameters (those it has) and
     the progress bar."""
-    from .solver import SolverOptions
+    from .options import SolverOptions
     return SolverOptions(**{k: params[k] for k in OPTION_KEYS if k in params},
                          progress=params.get("progress", False))
 

@@ -10,7 +10,8 @@ from dr_masonry import SolverOptions
 from dr_masonry.cases import squat_wall
 from dr_masonry.kernels import relaxation as R
 from dr_masonry.scene import OPTION_KEYS, RUN_PARAMS, scene_params, solver_options
-from dr_masonry.solver import BLOCK_IMBALANCE_WARN, LOOSE_BLOCK, OptionsError
+from dr_masonry.options import OptionsError
+from dr_masonry.solver import BLOCK_IMBALANCE_WARN, LOOSE_BLOCK
 
 
 def _fast_wall(tmp_path, block_tol):

@@ -15,7 +15,7 @@ from dr_masonry.loading import Combined, LoadingError, PointLoad, Pressure, cycl
 from dr_masonry.model import ModelError
 from dr_masonry.protocols import S5
 from dr_masonry.results import ResultsError, make_folder, open_result
-from dr_masonry.solver import OptionsError
+from dr_masonry.options import OptionsError
 from test_results import write_fake_result
 
 MAT = PlasticDamage.elastic(10e9, 0.2, 2000.0)

@@ -15,7 +15,8 @@ from scipy.spatial.transform import Rotation
 from dr_masonry import Force, Simulation, SolverOptions, Stage
 from dr_masonry.kernels import relaxation as R
 from dr_masonry.kernels.contact_frame import quad_dshape, quad_shape
-from dr_masonry.solver import DAMPING, Dyn
+from dr_masonry.options import DAMPING
+from dr_masonry.solver import Dyn
 
 import linear_reference as LR
 from test_damping import DOFS, _column, _loaded_column, _relax
