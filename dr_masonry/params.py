@@ -76,6 +76,27 @@ def format_params(params):
     return "\n".join(f"  {k:<{w}} = {v!r}" for k, v in params.items())
 
 
+#: parameters that shape one loading protocol's path only (the wall and house scenes S4-S7); the
+#: other protocol would ignore them
+PROTOCOL_KEYS = {"monotonic": ("drift", "target", "increments", "grading"),
+                 "cyclic": ("step", "quarter_increments", "n_amplitudes")}
+
+
+def check_protocol_keys(params, given):
+    """ParameterError for a parameter among ``given`` (the keys set explicitly) that the chosen
+    ``params["protocol"]`` would ignore (``step`` for a monotonic run, ``increments`` for a
+    cyclic one): the run would not be the one asked for. Scenes without a protocol pass."""
+    if "protocol" not in params:
+        return
+    mine = PROTOCOL_KEYS.get(params["protocol"], ())
+    for protocol, keys in PROTOCOL_KEYS.items():
+        stray = [k for k in keys if k in given and k in params and k not in mine]
+        if stray:
+            raise ParameterError(f"parameter {stray[0]}={params[stray[0]]!r} shapes the {protocol} "
+                                 f"path only; this run is protocol={params['protocol']} (its path: "
+                                 f"{', '.join(k for k in mine if k in params)})")
+
+
 def parse_overrides(params, argv=None, doc=None):
     """Defaults ``params`` updated by ``key=value`` arguments.
 

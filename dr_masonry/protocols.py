@@ -88,9 +88,9 @@ class Protocol:
         if not (math.isfinite(grading) and grading > 0):
             raise LoadingError(f"protocol {self.name}: grading must be > 0, got {grading!r}")
         goal = self.monotonic if target is None else float(target)
-        if not math.isfinite(goal):
-            raise LoadingError(f"protocol {self.name}: the monotonic target {target!r} is not "
-                               "finite")
+        if not math.isfinite(goal) or goal == 0.0:
+            raise LoadingError(f"protocol {self.name}: the monotonic target must be a finite "
+                               f"nonzero value (its sign sets the direction), got {target!r}")
         return goal * self._scale(height) * (np.arange(1, n + 1) / n) ** grading
 
 

@@ -5,7 +5,7 @@ import warnings
 
 import numpy as np
 
-from .params import ParameterError, output_path, parse_overrides, with_preset
+from .params import ParameterError, check_protocol_keys, output_path, parse_overrides, with_preset
 from .results import above_tol, make_folder, open_result
 from .solver import SolverError
 from .units import kN, mm
@@ -18,6 +18,7 @@ def scene_params(defaults, fast, argv, doc):
     params = parse_overrides(defaults, argv, doc)
     if params.get("fast"):              # the preset first, explicit overrides on top
         params = parse_overrides(with_preset(defaults, fast, True), argv, doc)
+    check_protocol_keys(params, {a.partition("=")[0].strip() for a in argv})
     params["h5"] = output_path(params) + ".h5"
     params["progress"] = True
     return params

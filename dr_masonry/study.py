@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .params import ParameterError, _coerce, with_preset
+from .params import ParameterError, _coerce, check_protocol_keys, with_preset
 from .results import ResultsError, make_folder
 
 #: keys the study sets itself in every variant's parameters
@@ -297,6 +297,11 @@ def run_study(scene, variants, base=None, out="results/study", scheduler=None, n
                 for label, ov in variants]
     if not variants:
         raise ParameterError("run_study: no variants")
+    for label, ov in variants:
+        try:
+            check_protocol_keys(dict(mod.PARAMS, **ov), set(ov))
+        except ParameterError as e:
+            raise ParameterError(f"variant {label!r}: {e}") from None
     names = [safe_label(label) for label, _ in variants]
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:

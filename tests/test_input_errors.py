@@ -13,9 +13,9 @@ from dr_masonry import (BodyForce, Displacement, Force, Gravity, JointLaw, Load,
 from dr_masonry.cli import main
 from dr_masonry.loading import Combined, LoadingError, PointLoad, Pressure, cyclic_path
 from dr_masonry.model import ModelError
+from dr_masonry.options import OptionsError
 from dr_masonry.protocols import S5
 from dr_masonry.results import ResultsError, make_folder, open_result
-from dr_masonry.options import OptionsError
 from test_results import write_fake_result
 
 MAT = PlasticDamage.elastic(10e9, 0.2, 2000.0)
@@ -299,6 +299,13 @@ def test_scene_parameters_and_resume_are_checked(tmp_path, capsys):
         (["run", "joint", "steps=0"], "parameter steps=0"),               # wrote empty CSVs
         (["run", "joint", "sigmas_MPa=abc"], "parameter sigmas_MPa='abc'"),
         (["run", "squat_wall", "fast=true", f"out={tmp_path}/f.txt/w"], "cannot create"),
+        # a parameter of the other protocol was ignored: a monotonic run for a cyclic one
+        (["run", "squat_wall", "fast=true", "protocol=cyclic", "increments=100"],
+         "parameter increments=100 shapes the monotonic path only; this run is protocol=cyclic"),
+        (["run", "terraced_house", "step=-0.001"],
+         "parameter step=-0.001 shapes the cyclic path only; this run is protocol=monotonic"),
+        (["run", "squat_wall", "fast=true", "drift=0"], "monotonic target must be a finite "
+                                                         "nonzero value"),   # ran a null push
     ]
     (tmp_path / "f.txt").write_text("")
     for argv, msg in cases:

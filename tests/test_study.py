@@ -120,6 +120,9 @@ def test_bad_input_before_any_run(tmp_path):
         run_study("squat_wall", [("a b", {}), ("a_b", {})], out=str(tmp_path))
     with pytest.raises(ParameterError, match="n_workers=0: must be >= 1"):
         run_study("squat_wall", [("a", {})], out=str(tmp_path), n_workers=0)
+    with pytest.raises(ParameterError, match=r"variant 'fine': parameter step=0.001 shapes the "
+                       "cyclic path only; this run is protocol=monotonic"):
+        run_study("squat_wall", [("fine", {"step": 0.001})], out=str(tmp_path))
     with pytest.raises(ParameterError, match="case 'joint' cannot run in a study"):
         run_study("joint", [("a", {})], out=str(tmp_path))
     assert not os.listdir(tmp_path)
