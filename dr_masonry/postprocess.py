@@ -13,6 +13,10 @@ class PostprocessError(ValueError):
     """A history that does not hold what was asked for."""
 
 
+#: history columns of the solver's work per row (:func:`energy_per_cycle` sums them per cycle)
+WORK_COLUMNS = ("iterations", "cut_iterations", "time_s", "cut_s")
+
+
 def cycle_bounds(u):
     """Row ranges of the full cycles of a cyclic displacement history.
 
@@ -75,7 +79,10 @@ def energy_per_cycle(history, key, rows=None, force=None):
         (|F(u_max) u_max| + |F(u_min) u_min|))`` (Jacobsen's ``E_D / (4 pi E_so)`` with the
         strain energy ``E_so`` of each half cycle at its peak displacement; NaN for a cycle
         without displacement). The energies are those of the whole model: give the force acting
-        on it (a half model's own, not the whole building's).
+        on it (a half model's own, not the whole building's). With the solver's columns in the
+        history (``WORK_COLUMNS``), what the cycle cost: ``rows``, ``iterations`` and
+        ``cut_iterations`` (relaxation iterations of its rows and of the attempts cut in two),
+        ``solve_s`` (s of relaxation, cut attempts included).
     """
     if not isinstance(history, Mapping) and isinstance(getattr(history, "history", None), Mapping):
         history = history.history
@@ -113,6 +120,8 @@ def energy_per_cycle(history, key, rows=None, force=None):
     u = np.asarray(history[key])[sel]
     cum = {k: np.asarray(history[k])[sel] for k in ("D_blocks", "D_joints", "W_ext")}
     f = np.asarray(history[force])[sel] if force is not None else None
+    work = ({k: np.nan_to_num(np.asarray(history[k], dtype=np.float64)[sel]) for k in WORK_COLUMNS}
+            if all(k in history and len(history[k]) == sel.size for k in WORK_COLUMNS) else None)
     before = {k: (np.asarray(history[k])[first - 1] if first > 0 else 0.0) for k in cum}
     out = []
     bounds = cycle_bounds(u)
@@ -126,6 +135,10 @@ def energy_per_cycle(history, key, rows=None, force=None):
             start = v[a - 1] if a > 0 else before[k]
             row[k] = float(v[b - 1] - start)
         row["D_total"] = row["D_blocks"] + row["D_joints"]
+        if work:
+            row.update(rows=b - a, iterations=int(work["iterations"][a:b].sum()),
+                       cut_iterations=int(work["cut_iterations"][a:b].sum()),
+                       solve_s=float(work["time_s"][a:b].sum() + work["cut_s"][a:b].sum()))
         if f is not None:
             hi, lo = a + int(np.argmax(u[a:b])), a + int(np.argmin(u[a:b]))
             row.update(u_max=float(u[hi]), u_min=float(u[lo]), F_max=float(f[a:b].max()),
@@ -139,7 +152,8 @@ def energy_per_cycle(history, key, rows=None, force=None):
 def cycle_text(cycles, u_unit=1e-3, f_unit=1e3):
     """Per-cycle table of :func:`energy_per_cycle` as text lines: displacements in ``u_unit`` m
     (default mm), forces in ``f_unit`` (default kN), energies J. Cycles without ``force`` give
-    the amplitude instead of the peaks, forces and xi_eq; a cycle a run stopped inside
+    the amplitude instead of the peaks, forces and xi_eq; with the solver's work (rows,
+    iterations, minutes of relaxation) where the cycles carry it; a cycle a run stopped inside
     (``complete`` False) is marked ``(partial)``."""
     for name, v in (("u_unit", u_unit), ("f_unit", f_unit)):
         if not (is_number(v) and v > 0):
@@ -154,15 +168,20 @@ def cycle_text(cycles, u_unit=1e-3, f_unit=1e3):
             raise PostprocessError(f"cycle_text: cycle {i} lacks {missing}; give the list "
                                    "energy_per_cycle returns")
 
-    def partial(c):
-        return "" if c.get("complete", True) else " (partial)"
+    work = all("iterations" in c for c in cycles)
+
+    def tail(c):
+        cost = (f"  {c['rows']:5d} {c['iterations']:11d} {c['cut_iterations']:10d} "
+                f"{c['solve_s'] / 60:7.1f}" if work else "")
+        return cost + ("" if c.get("complete", True) else " (partial)")
+    cost = "   rows  iterations    in cuts     min" if work else ""
     if not peaks:
-        return "\n".join(["cycle  amplitude  dissipated (joints / blocks) J"] + [
+        return "\n".join(["cycle  amplitude  dissipated (joints / blocks) J" + cost] + [
             f"{c['cycle']:5d} {c['amplitude'] / u_unit:10.2f}  {c['D_total']:10.2f} "
-            f"({c['D_joints']:.2f} / {c['D_blocks']:.2f}){partial(c)}" for c in cycles])
-    lines = ["cycle  u_max  u_min   F_max   F_min  dissipated (joints / blocks) J  xi_eq"]
+            f"({c['D_joints']:.2f} / {c['D_blocks']:.2f}){tail(c)}" for c in cycles])
+    lines = ["cycle  u_max  u_min   F_max   F_min  dissipated (joints / blocks) J  xi_eq" + cost]
     for c in cycles:
         lines.append(f"{c['cycle']:5d} {c['u_max'] / u_unit:6.2f} {c['u_min'] / u_unit:6.2f} "
                      f"{c['F_max'] / f_unit:7.2f} {c['F_min'] / f_unit:7.2f}  {c['D_total']:10.2f} "
-                     f"({c['D_joints']:.2f} / {c['D_blocks']:.2f})   {c['xi_eq']:.3f}{partial(c)}")
+                     f"({c['D_joints']:.2f} / {c['D_blocks']:.2f})   {c['xi_eq']:.3f}{tail(c)}")
     return "\n".join(lines)

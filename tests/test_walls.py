@@ -171,6 +171,13 @@ def test_energy_per_cycle(slender_cyclic):
     total = (hist["D_blocks"] + hist["D_joints"])[-1] - (hist["D_blocks"] + hist["D_joints"])[first - 1]
     assert d.sum() == pytest.approx(total, rel=1e-12)
     assert min(d[2:]) > max(d[:2])
+    # what each cycle cost: the push rows' iterations and times, cycle by cycle
+    assert sum(c["rows"] for c in cycles) == push.sum()
+    for col, key in (("iterations", "iterations"), ("cut_iterations", "cut_iterations")):
+        assert sum(c[key] for c in cycles) == hist[col][push].sum()
+    assert sum(c["solve_s"] for c in cycles) == pytest.approx(
+        (hist["time_s"] + hist["cut_s"])[push].sum(), rel=1e-12)
+    assert all(c["iterations"] >= c["rows"] for c in cycles)
     with_force = energy_per_cycle(hist, "beam.ux", push, force="beam.fx")
     for c, e in zip(with_force, cycles):
         assert {k: c[k] for k in e} == e           # the energies are the same
@@ -193,6 +200,12 @@ def test_equivalent_damping_by_hand(tmp_path):
     assert (c["u_max"], c["u_min"], c["F_max"], c["F_min"]) == (2e-3, -2e-3, 16e3, -14e3)
     assert "0.044" in cycle_text([c]).splitlines()[1]
     assert c["complete"] and "partial" not in cycle_text([c])
+    assert "iterations" not in c                   # no solver columns in this history
+    work = dict(h, iterations=np.full(9, 100.0), cut_iterations=np.r_[np.zeros(8), 40.0],
+                time_s=np.full(9, 2.0), cut_s=np.r_[np.zeros(8), 6.0])
+    (w,) = energy_per_cycle(work, "u", force="F")
+    assert (w["rows"], w["iterations"], w["cut_iterations"], w["solve_s"]) == (9, 900, 40, 24.0)
+    assert cycle_text([w]).splitlines()[1].endswith("  9         900         40     0.4")
     # a run stopped inside its cycle (at -1 mm on the way back, or before it went negative)
     for stop in (8, 5):
         (p,) = energy_per_cycle({k: v[:stop] for k, v in h.items()}, "u", force="F")
