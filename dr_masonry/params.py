@@ -85,10 +85,11 @@ PROTOCOL_KEYS = {"monotonic": ("drift", "target", "increments", "grading"),
 def check_protocol_keys(params, given):
     """ParameterError for a parameter among ``given`` (the keys set explicitly) that the chosen
     ``params["protocol"]`` would ignore (``step`` for a monotonic run, ``increments`` for a
-    cyclic one): the run would not be the one asked for. Scenes without a protocol pass."""
-    if "protocol" not in params:
+    cyclic one): the run would not be the one asked for. Scenes without a protocol pass, and so
+    does an unknown protocol (the scene's own check names the valid ones)."""
+    if params.get("protocol") not in PROTOCOL_KEYS:
         return
-    mine = PROTOCOL_KEYS.get(params["protocol"], ())
+    mine = PROTOCOL_KEYS[params["protocol"]]
     for protocol, keys in PROTOCOL_KEYS.items():
         stray = [k for k in keys if k in given and k in params and k not in mine]
         if stray:
