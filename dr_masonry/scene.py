@@ -37,6 +37,8 @@ RUN_PARAMS = dict(
     stall_iter=10_000,      # iterations without 10 % progress before an attempt is cut
                             # (SolverOptions; 0: never)
     floor_tol=0.0,          # accept a stalled increment at this residual (SolverOptions; 0: off)
+    gap_tol=0.0,            # ... only if its out-of-balance resultant is at most this fraction
+                            # of the driving force (SolverOptions; 0: off)
     block_tol=0.1,          # every block balanced to this fraction of its forces (SolverOptions)
     frames=5,               # write a field frame every this many increments (and at each
                             # turning point of a cyclic path)
@@ -52,7 +54,7 @@ RUN_PARAMS = dict(
 )
 #: scene parameters that are :class:`SolverOptions` fields of the same name
 OPTION_KEYS = ("tol", "damping", "coarse", "max_dissipation", "redetect", "max_iter", "max_cuts",
-               "stall_iter", "floor_tol", "block_tol")
+               "stall_iter", "floor_tol", "gap_tol", "block_tol")
 #: parameters that may differ when a run is continued: how it is solved and written, not what
 SOLVER_KEYS = {"resume", "resume_from", "replot", "maps", "compare", "progress", "out", "h5",
                "frames", "solver", *OPTION_KEYS}

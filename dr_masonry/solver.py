@@ -36,6 +36,11 @@ from .results import (ResultsError, ResultWriter, check_stored, ends_run, make_f
 
 #: energies of an increment at its current state (:meth:`Simulation._energies`)
 Energies = namedtuple("Energies", "stored f_tot dw ratio diss element_diss joint_diss")
+#: a row's overall balance (:meth:`Simulation._resultant`): the reference points' generalised
+#: out-of-balance forces ``rpres`` (n_rp, 6), the out-of-balance resultant ``gap`` (3,) N, the
+#: driving force ``drive`` (3,) N (NaN on the axes no control drives), their largest ratio and
+#: its axis (0-2)
+Balance = namedtuple("Balance", "rpres gap drive ratio axis")
 #: nodal state (n_nodes, 3) unless noted: X reference coordinates m, U displacements m, V velocities
 #: (m per unit fictitious step), minv (n_nodes,) inverse fictitious masses, free 1/0 per DOF, tied
 #: (n_nodes,) reference point or -1, fext constant loads N, P indirect pattern N per unit factor,
@@ -43,9 +48,12 @@ Energies = namedtuple("Energies", "stored f_tot dw ratio diss element_diss joint
 #: rpf applied and rpP pattern generalised forces, rpX (n_rp, 3) m, rpptr/rpnodes CSR of tied
 #: nodes, rpradius (n_rp,) m radius of gyration (moment scale); ring (n_nodes, 3) velocity-reversal
 #: counts of the ring damping (``R.relax``); bstart (n_blocks + 1,) first node of each block,
-#: bratio (n_blocks,) each block's imbalance ratio at the end of the last relaxation
+#: bratio (n_blocks,) each block's imbalance ratio at the end of the last relaxation; gnode
+#: (n_nodes, 3) and grp (n_rp, 6) 1.0 at the DOFs whose prescribed motion drives the increment,
+#: gspec (4, 3) the driven axes, their largest driving force so far, the out-of-balance resultant
+#: and the driving force (``R.resultant``)
 Dyn = namedtuple("Dyn", "X U V minv free tied fext P fint res rpX rpU rpV rpminv rpfree rpf rpP "
-                        "rpptr rpnodes rpradius ring bstart bratio")
+                        "rpptr rpnodes rpradius ring bstart bratio gnode grp gspec")
 
 #: most iterations of one compiled ``relax`` call (rounded down to a multiple of check_every):
 #: Python regains control at least this often (progress bar, Ctrl-C: seconds, not the tens of
@@ -361,7 +369,7 @@ class Simulation:
                        z.copy(), rpX, np.zeros((nr, 6)), np.zeros((nr, 6)), rpminv,
                        np.ones((nr, 6)), np.zeros((nr, 6)), np.zeros((nr, 6)), rpptr, rpnodes,
                        rpradius, z.copy(), np.ascontiguousarray(m.block_node_start, np.int64),
-                       np.zeros(m.n_blocks))
+                       np.zeros(m.n_blocks), z.copy(), np.zeros((nr, 6)), np.zeros((4, 3)))
         from .sliding import Sliding
         self.sliding = Sliding(self) if (o.redetect and nc) else None
         movable = int((~m.block_fixed).sum())
@@ -775,8 +783,11 @@ class Simulation:
         if o.predictor and self.du_prev is not None and self.dctl_prev != 0.0 and dctl * self.dctl_prev > 0:
             ratio = min(dctl / self.dctl_prev, 2.0)
             d.U[:] += ratio * self.du_prev * d.free
+        moved = [targets[k][0] for k in goal if goal[k] != start[k]]
+        self._drive(moved, indirect)
         info = np.zeros(R.N_INFO)
         info[R.I_BLOCK_TOL] = o.block_tol
+        info[R.I_GAP_TOL] = o.gap_tol
         max_iter = stage.max_iter or o.max_iter
         tol = stage.tol or o.tol
         stall = o.stall_iter if depth < o.max_cuts else 0
@@ -809,17 +820,25 @@ class Simulation:
             ratio = max(ratio, tol * info[R.I_BLOCK] / o.block_tol)
         floor = short and 0.0 < ratio <= o.floor_tol
         energies = self._energies() if status == R.ST_CONVERGED or floor else None
+        balance = self._resultant() if energies is not None else None
+        # a row at the floor whose out-of-balance resultant is a large part of the driving force
+        unbalanced = floor and o.gap_tol > 0 and balance.ratio > o.gap_tol
         # a half that dissipates as much as the whole step holds a jump (a crack that runs
         # unstably): smaller steps would only repeat it, so it is accepted
-        too_much = (energies is not None and o.max_dissipation > 0 and depth < o.max_cuts
-                    and energies.ratio > o.max_dissipation
+        too_much = (energies is not None and not unbalanced and o.max_dissipation > 0
+                    and depth < o.max_cuts and energies.ratio > o.max_dissipation
                     and not (parent_diss is not None and energies.diss >= JUMP * parent_diss))
-        if (short and not floor) or too_much:
+        if (short and not floor) or unbalanced or too_much:
             self._restore(snap)
             self._cut_work[0] += int(info[R.I_ITERS])
             self._cut_work[1] += elapsed
             if depth >= o.max_cuts:
-                if info[R.I_RESID] >= 1.0:
+                if unbalanced:
+                    k = balance.axis
+                    hint = (f"; at the floor, its out-of-balance resultant {balance.gap[k]:.4g} N "
+                            f"along {'xyz'[k]} is {balance.ratio:.2%} of the driving force (gap_tol "
+                            f"{o.gap_tol}): continue with a larger gap_tol, max_iter or max_cuts")
+                elif info[R.I_RESID] >= 1.0:
                     hint = ("; the out-of-balance force exceeds the loads: an unstable step (safety "
                             f"factor {o.safety}) or a structure that lost equilibrium")
                 else:
@@ -836,11 +855,12 @@ class Simulation:
         if floor:
             warnings.warn(f"increment {self.increment + 1} of stage {stage.name!r} accepted at "
                           f"residual ratio {info[R.I_RESID]:.2e} (tol {tol:.1e}, floor_tol "
-                          f"{o.floor_tol:.1e}) after {int(info[R.I_ITERS])} iterations",
+                          f"{o.floor_tol:.1e}) after {int(info[R.I_ITERS])} iterations, "
+                          f"out-of-balance resultant {balance.ratio:.2%} of the driving force",
                           RuntimeWarning, stacklevel=2)
         self.du_prev = self._predictor_motion(u_before)
         self.dctl_prev = dctl
-        self._commit(info, elapsed, energies)
+        self._commit(info, elapsed, energies, balance)
         if depth > 0 and self._checkpoint_due():
             self._write_checkpoint(inside=True)   # a part of a cut increment (hours, some)
 
@@ -978,14 +998,55 @@ class Simulation:
         return Energies(eint, f_tot, dw, ddiss / w_ext if w_ext > 0 else 0.0, ddiss, element_diss,
                         joint_diss)
 
-    def _commit(self, info, elapsed, energies):
-        """Accept a converged increment (``energies`` from :meth:`_energies` at its end):
-        reactions, history row, state commit."""
+    def _drive(self, moved, indirect):
+        """Mark what drives the increment for ``R.resultant`` (``dyn.gnode``, ``grp``, ``gspec``
+        rows 0-1): the translations of the controls it moves (``moved``: ``Displacement`` and
+        ``Indirect`` controls; one that holds its value is a support), the prescribed DOFs whose
+        reactions drive it (``indirect``, the stage's indirect control, drives by its pattern),
+        and each driven axis's largest |driving force| of the run so far (history ``drive.f*``)."""
+        d = self.dyn
+        d.gnode[:] = 0.0
+        d.grp[:] = 0.0
+        d.gspec[:] = 0.0
+        for ctl in moved:
+            if not isinstance(ctl, (L.Displacement, L.Indirect)):
+                continue
+            rigid = isinstance(ctl.target, L.RigidPoint)
+            k = L.dof_index(ctl.dof, rigid)
+            if k >= 3:
+                continue
+            d.gspec[0, k] = 1.0
+            past = np.asarray(self.history.get(f"drive.f{'xyz'[k]}", []))
+            d.gspec[1, k] = np.nanmax(np.abs(past), initial=0.0)
+            if ctl is indirect:
+                continue
+            if rigid:
+                d.grp[ctl.target.index, k] = 1.0
+            else:
+                d.gnode[ctl.target.nodes, k] = 1.0
+
+    def _resultant(self):
+        """The overall balance of the current state as :data:`Balance` (after
+        :meth:`_energies`, which leaves the internal forces of these displacements): the
+        out-of-balance resultant, the driving force (NaN on undriven axes) and their ratio of
+        ``R.resultant``, with the driving set by :meth:`_drive`. The norm of the residual ratio
+        weighs every DOF against loads that gravity may dominate, so a row at the residual floor
+        can keep a resultant of several per cent of a lateral load (docs/validation.md, "Rows
+        accepted at the residual floor")."""
+        d = self.dyn
+        rpres = np.zeros((d.rpX.shape[0], 6))
+        R.residual(d, self.lam[0], rpres)
+        ratio, axis = R.resultant(d, self.lam[0], rpres)
+        drive = np.where(d.gspec[0] > 0.0, d.gspec[3], np.nan)
+        return Balance(rpres, d.gspec[2].copy(), drive, ratio, axis)
+
+    def _commit(self, info, elapsed, energies, balance):
+        """Accept a converged increment (``energies`` from :meth:`_energies` at its end, then
+        ``balance`` from :meth:`_resultant`): reactions, history row, state commit."""
         d = self.dyn
         mesh, cont = self.mesh, self.cont
         eint, f_tot, dw, ratio = energies[:4]
-        rpres = np.zeros((d.rpX.shape[0], 6))
-        R.residual(d, self.lam[0], rpres)
+        rpres = balance.rpres
         lam = float(self.lam[0])
         self.energy["W_ext"] += float(dw.sum())
         # gross work: the scale of the balance error when works of opposite sign cancel (rocking)
@@ -1015,7 +1076,10 @@ class Simulation:
                "max_dt": float(mesh.s_old[:, :, MS_DT].max()),   # (a model has elements)
                "max_dc": float(mesh.s_old[:, :, MS_DC].max()),
                "max_overhang": self._check_overhang(),
-               "block_imbalance": self._check_balance(info)}
+               "block_imbalance": self._check_balance(info), "gap_ratio": balance.ratio}
+        for k, name in enumerate("xyz"):
+            row[f"gap.f{name}"] = balance.gap[k]
+            row[f"drive.f{name}"] = balance.drive[k]
         self._check_return_mapping()
         for rp in self.rigid_points:
             for name, k in L.DOFS.items():

@@ -99,7 +99,10 @@ I_BLOCK_TOL = 24  # largest block imbalance ratio accepted (set by the caller; 0
 I_BLOCK = 25      # largest block imbalance ratio at exit (:func:`block_imbalance`; every
                   # block's in ``dyn.bratio``)
 I_BLOCK_ID = 26   # the block that has it
-N_INFO = 27
+I_GAP_TOL = 27    # largest out-of-balance resultant ratio accepted (set by the caller; 0: not a
+                  # criterion; :func:`resultant`)
+I_GAP = 28        # that ratio at the last check
+N_INFO = 29
 
 # kinds of place a guard names (info[I_KIND])
 WHERE_NODE = 0
@@ -289,6 +292,50 @@ def norms(dyn, lam, rpres):
             else:
                 ref += f * f + (rpres[p, k] * sc) ** 2
     return np.sqrt(rf), np.sqrt(ref)
+
+
+@jit
+def resultant(dyn, lam, rpres):
+    """Out-of-balance resultant against the driving force.
+
+    ``dyn.gspec`` (4, 3): row 0 marks (1.0) the translations x, y, z that the increment's
+    controls drive, row 1 holds each one's largest |driving force| so far (N); rows 2 and 3 are
+    written: the resultant (N), the free DOFs' out-of-balance forces ``dyn.res`` summed (tied
+    nodes through their reference points' ``rpres`` (n_rp, 6)), i.e. the loads minus the
+    supports' reactions since internal forces sum to zero; and the driving force (N), the
+    indirect pattern's applied resultant (``lam`` times ``dyn.P`` and ``dyn.rpP``) plus the
+    reactions of the DOFs whose prescribed motion drives the increment (``dyn.gnode``
+    (n_nodes, 3), ``dyn.grp`` (n_rp, 6): 1.0 there). The ratio is |resultant| over the larger of
+    |driving force| and its largest so far, on the driven axes (0 where both are 0 or none is
+    driven): how far a curve's force may be from the reaction that should balance it.
+    Returns (that ratio, its axis 0-2)."""
+    g = dyn.gspec
+    for k in range(3):
+        g[2, k] = 0.0
+        g[3, k] = 0.0
+    for i in range(dyn.U.shape[0]):
+        for k in range(3):
+            r = dyn.res[i, k]
+            if dyn.free[i, k] > 0.0:
+                g[2, k] += r
+            elif dyn.gnode[i, k] > 0.0:
+                g[3, k] -= r
+            g[3, k] += lam * dyn.P[i, k]
+    for p in range(dyn.rpX.shape[0]):
+        for k in range(3):
+            if dyn.rpfree[p, k] > 0.0:
+                g[2, k] += rpres[p, k]
+            elif dyn.grp[p, k] > 0.0:
+                g[3, k] -= rpres[p, k]
+            g[3, k] += lam * dyn.rpP[p, k]
+    worst = 0.0
+    at = 0
+    for k in range(3):
+        scale = max(abs(g[3, k]), g[1, k])
+        if g[0, k] > 0.0 and scale > 0.0 and abs(g[2, k]) / scale > worst:
+            worst = abs(g[2, k]) / scale
+            at = k
+    return worst, at
 
 
 @jit
@@ -502,7 +549,9 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, ring, tol, ref
         smallest reference force that counts, for an unloaded model) and, with
         ``info[I_BLOCK_TOL]`` > 0, every block's imbalance ratio (:func:`block_imbalance`) is at
         most ``info[I_BLOCK_TOL]``; the stall and rate tests below then follow the larger of the
-        residual ratio and the block ratio scaled by tol / ``info[I_BLOCK_TOL]``.
+        residual ratio and the block ratio scaled by tol / ``info[I_BLOCK_TOL]``; likewise, with
+        ``info[I_GAP_TOL]`` > 0, the out-of-balance resultant's ratio (:func:`resultant`) must
+        be at most ``info[I_GAP_TOL]`` (``info[I_GAP]``: its value at the last check).
     max_iter : int
         iterations of this call at most (ST_MAXITER when they run out).
     check_every : int
@@ -573,6 +622,8 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, ring, tol, ref
     win_k = info[I_WIN_K]
     last_check = seg
     block_tol = info[I_BLOCK_TOL]
+    gap_tol = info[I_GAP_TOL]
+    gap = info[I_GAP]
     if seg == 0:
         dyn.ring[:] = 0.0
     hbuf = mesh.fbuf.reshape((-1, 3))
@@ -611,6 +662,11 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, ring, tol, ref
                 rb = tol * block_imbalance(cont, dyn, lam, dyn.bratio)[0] / block_tol
                 done = done and rb <= tol
                 ratio = max(ratio, rb)
+            if gap_tol > 0.0:   # the resultant too, scaled the same way
+                gap = resultant(dyn, lam, rpres)[0]
+                rg = tol * gap / gap_tol
+                done = done and rg <= tol
+                ratio = max(ratio, rg)
             if done and its > 1:
                 status = ST_CONVERGED
                 break
@@ -788,6 +844,7 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, ring, tol, ref
     info[I_RESID] = rn / max(ref, ref_floor)
     if it > 0:
         info[I_BLOCK], info[I_BLOCK_ID] = block_imbalance(cont, dyn, lam, dyn.bratio)
+    info[I_GAP] = gap
     info[I_KE] = ke
     info[I_DAMPED] = damped
     info[I_GOAL] = goal

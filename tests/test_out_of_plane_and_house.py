@@ -76,6 +76,23 @@ def test_s7_reactions_split_by_wall(s7):
     assert hist["base_W1.fz"][k] < hist["base_W1.fz"][g_end]
 
 
+def test_s7_out_of_balance_resultant_is_load_minus_reaction(s7):
+    """Every row's out-of-balance resultant along the push (history ``gap.fx``: the free DOFs'
+    residuals summed) is the floors' applied load minus the foundation's reaction (the scene's
+    contact reaction ``base.fx``), and the driving force ``drive.fx`` the floors' load, 2 x the
+    load factor on the half model; the gravity rows drive nothing (the floor held at 0 is a
+    support) and have no ratio."""
+    sim, hist, push = s7
+    lam = hist["lambda"]
+    np.testing.assert_allclose(hist["gap.fx"], 2 * lam + hist["base.fx"], rtol=0,
+                               atol=1e-9 * np.abs(lam).max())
+    np.testing.assert_allclose(hist["drive.fx"][push], 2 * lam[push], rtol=1e-12)
+    assert np.isnan(hist["drive.fx"][~push]).all() and not hist["gap_ratio"][~push].any()
+    scale = np.maximum.accumulate(np.abs(hist["drive.fx"][push]))
+    np.testing.assert_allclose(hist["gap_ratio"][push], np.abs(hist["gap.fx"][push]) / scale,
+                               rtol=1e-12)
+
+
 def test_s7_softens_and_balances(s7):
     sim, hist, push = s7
     V = hist["base_shear"][push]

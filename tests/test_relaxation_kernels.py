@@ -194,7 +194,8 @@ def _dyn(n, nr, n_tied):
                np.zeros((nr, 3)), np.zeros((nr, 6)), np.zeros((nr, 6)), np.ones((nr, 6)),
                np.ones((nr, 6)), np.zeros((nr, 6)), np.zeros((nr, 6)),
                np.zeros(nr + 1, np.int64), np.zeros(n_tied, np.int64), np.ones(nr), z.copy(),
-               np.array([0, n], np.int64), np.zeros(1))
+               np.array([0, n], np.int64), np.zeros(1), z.copy(), np.zeros((nr, 6)),
+               np.zeros((4, 3)))
 
 
 def test_norms_hand_values():
@@ -223,6 +224,37 @@ def test_norms_hand_values():
     rf, ref = R.norms(d, 2.0, rpres)
     assert rf == pytest.approx(np.sqrt(28.0), rel=1e-15)
     assert ref == pytest.approx(np.sqrt(43.0), rel=1e-15)
+
+
+def test_resultant_hand_values():
+    """Node 0 free (x, y), z supported; node 1 driven in x by a prescribed motion (gnode),
+    otherwise supported; node 2 tied to the point, whose x is free and y driven (grp); pattern
+    P on node 0 and the point, lam 2; x and y driven, z not.
+
+    Resultant (free residuals): x 3 (node 0) + 1 (point) = 4, y -2 (node 0), z 5 (point).
+    Driving force: x -(-6) (node 1's reaction) + 2 (1 + 2) (pattern) = 12; y -(4) (point) +
+    2 (0 + 1) = -2, its largest so far 8. Ratios x 4 / 12, y 2 / 8; z not driven."""
+    d = _dyn(3, 1, 1)
+    d.res[:] = [[3, -2, 9], [-6, 5, 5], [7, 7, 7]]
+    d.free[:] = [[1, 1, 0], [0, 0, 0], [0, 0, 0]]
+    d.gnode[1, 0] = 1.0
+    d.P[0] = [1, 0, 0]
+    d.rpP[0] = [2, 1, 0, 0, 0, 0]
+    d.tied[2] = 0
+    d.rpfree[0] = [1, 0, 1, 0, 0, 0]
+    d.grp[0, 1] = 1.0
+    d.gspec[0] = [1, 1, 0]
+    d.gspec[1] = [0, 8, 0]
+    rpres = np.array([[1.0, 4, 5, 0, 0, 0]])
+    ratio, axis = R.resultant(d, 2.0, rpres)
+    np.testing.assert_allclose(d.gspec[2], [4, -2, 5], rtol=1e-15)
+    np.testing.assert_allclose(d.gspec[3, :2], [12, -2], rtol=1e-15)
+    assert ratio == pytest.approx(1 / 3, rel=1e-15) and axis == 0
+    d.gspec[1, 1] = 4.0   # y's ratio 2 / 4 now the larger
+    ratio, axis = R.resultant(d, 2.0, rpres)
+    assert ratio == pytest.approx(0.5, rel=1e-15) and axis == 1
+    d.gspec[0] = 0.0      # nothing driven
+    assert R.resultant(d, 2.0, rpres)[0] == 0.0
 
 
 def test_block_imbalance_hand_values():
