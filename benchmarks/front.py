@@ -27,7 +27,8 @@ in ``benchmarks/out/front_ref_*.npz`` under a hash of their settings (``refresh=
 them, e.g. after a solver change).
 
 Settings: tolerances ``tols``, safety factors ``safeties`` (fictitious masses = safety x
-Gershgorin row sum / 4), meshes (hexahedra per brick, along x thickness x height, or the squat
+Gershgorin row sum / 4), out-of-balance resultant bounds ``gap_tols`` (``SolverOptions.gap_tol``;
+0: off, the default), meshes (hexahedra per brick, along x thickness x height, or the squat
 wall's ``coarse``/``fine``). ``grid=axes`` varies one at a time from the defaults
 (``SolverOptions`` tol and safety, the scene's default mesh), ``grid=full`` runs every combination.
 ``coarse`` sets ``SolverOptions.coarse`` (two-level relaxation, the default) for every run.
@@ -56,6 +57,7 @@ PARAMS = dict(
     grid="axes",             # axes (one setting at a time from the defaults) | full
     tols="1e-2,3e-3,1e-3,3e-4,1e-4,3e-5",
     safeties="1.0,1.1,1.5,2.0",
+    gap_tols="0",            # SolverOptions.gap_tol values (0: off)
     threshold=0.01,          # largest acceptable err of the recommended setting
     ref_tol=1e-6,
     refresh=False,           # recompute the cached reference runs
@@ -90,14 +92,14 @@ def floats(text):
     return [float(v) for v in text.split(",")]
 
 
-def timed_run(sim, stages, safety, coarse):
-    """Run ``stages`` with the mass-scaling ``safety`` and ``SolverOptions.coarse`` (validated
-    by ``SolverOptions``).
+def timed_run(sim, stages, safety, coarse, gap_tol=0.0):
+    """Run ``stages`` with the mass-scaling ``safety``, ``SolverOptions.coarse`` and
+    ``SolverOptions.gap_tol`` (validated by ``SolverOptions``).
 
     Returns (history dict of arrays, wall time s, "" or the SolverError message).
     """
     from dr_masonry import SolverError
-    sim.options = dataclasses.replace(sim.options, safety=safety, coarse=coarse)
+    sim.options = dataclasses.replace(sim.options, safety=safety, coarse=coarse, gap_tol=gap_tol)
     t0 = time.perf_counter()
     err = ""
     with warnings.catch_warnings():
@@ -189,10 +191,10 @@ def direct_solve(params, mesh):
     return cached("linear", dict(mesh=mesh, blocks=params["col_blocks"], load=LOAD), params, compute)
 
 
-def run_linear(params, mesh, tol, safety):
+def run_linear(params, mesh, tol, safety, gap_tol):
     """Table row of one column run: wall_s, iterations, err, err_tip_mesh, status."""
     sim, stages, _, _ = column(params, mesh, tol)
-    hist, wall, err = timed_run(sim, stages, safety, params["coarse"])
+    hist, wall, err = timed_run(sim, stages, safety, params["coarse"], gap_tol)
     row = dict(wall_s=wall, iterations=int(hist["iterations"].sum()) if "iterations" in hist else 0,
                err=np.nan, err_tip_mesh=np.nan, status="FAILED: " + err[:120] if err else "ok")
     if not err:
@@ -223,10 +225,10 @@ def scene(problem, params, mesh, tol):
     return sim, stages, "beam.ux", "beam.fx", 1.0
 
 
-def curve(problem, params, mesh, tol, safety):
+def curve(problem, params, mesh, tol, safety, gap_tol=0.0):
     """(x, y, wall s, iterations, error text) of one S2/S5 run (x, y over the loading stage)."""
     sim, stages, xk, yk, scale = scene(problem, params, mesh, tol)
-    hist, wall, err = timed_run(sim, stages, safety, params["coarse"])
+    hist, wall, err = timed_run(sim, stages, safety, params["coarse"], gap_tol)
     its = int(hist["iterations"].sum()) if "iterations" in hist else 0
     if err:
         return None, None, wall, its, err
@@ -251,10 +253,10 @@ def reference_curve(problem, params, mesh):
     return cached(problem, key, params, compute)
 
 
-def run_curve(problem, params, mesh, tol, safety):
+def run_curve(problem, params, mesh, tol, safety, gap_tol):
     """Table row of one S2/S5 run: wall_s, iterations, err, err_peak, err_curve,
     err_peak_same_mesh, status."""
-    x, y, wall, its, err = curve(problem, params, mesh, tol, safety)
+    x, y, wall, its, err = curve(problem, params, mesh, tol, safety, gap_tol)
     row = dict(wall_s=wall, iterations=its, err=np.nan, err_peak=np.nan, err_curve=np.nan,
                err_peak_same_mesh=np.nan, status="FAILED: " + err[:120] if err else "ok")
     if not err:
@@ -268,18 +270,19 @@ def run_curve(problem, params, mesh, tol, safety):
 
 # ------------------------------------------------------------------ sweep, table, plot
 def settings(params, meshes, default_mesh):
-    """(tol, safety, mesh) triples of the sweep."""
+    """(tol, safety, mesh, gap_tol) of each run of the sweep."""
     from dr_masonry import SolverOptions
     d = SolverOptions()
-    tols, safeties = floats(params["tols"]), floats(params["safeties"])
+    tols, safeties, gaps = (floats(params[k]) for k in ("tols", "safeties", "gap_tols"))
     if params["grid"] == "full":
-        return list(itertools.product(tols, safeties, meshes))
+        return list(itertools.product(tols, safeties, meshes, gaps))
     if params["grid"] != "axes":
         from dr_masonry.params import ParameterError
         raise ParameterError(f"parameter grid={params['grid']!r}: valid values are ['axes', 'full']")
-    out = [(t, d.safety, default_mesh) for t in tols]
-    out += [(d.tol, s, default_mesh) for s in safeties if s != d.safety]
-    out += [(d.tol, d.safety, m) for m in meshes if m != default_mesh]
+    out = [(t, d.safety, default_mesh, d.gap_tol) for t in tols]
+    out += [(d.tol, s, default_mesh, d.gap_tol) for s in safeties if s != d.safety]
+    out += [(d.tol, d.safety, m, d.gap_tol) for m in meshes if m != default_mesh]
+    out += [(d.tol, d.safety, default_mesh, g) for g in gaps if g != d.gap_tol]
     return out
 
 
@@ -301,13 +304,15 @@ def sweep(problem, params):
     dmesh = default_mesh(problem)
     meshes = params[f"{problem}_meshes"].split(",")
     rows = []
-    for tol, safety, mesh in settings(params, meshes, dmesh):
-        res = (run_linear(params, mesh, tol, safety) if problem == "linear"
-               else run_curve(problem, params, mesh, tol, safety))
-        is_default = (tol, safety, mesh, params["coarse"]) == (d.tol, d.safety, dmesh, d.coarse)
+    for tol, safety, mesh, gap in settings(params, meshes, dmesh):
+        res = (run_linear(params, mesh, tol, safety, gap) if problem == "linear"
+               else run_curve(problem, params, mesh, tol, safety, gap))
+        is_default = ((tol, safety, mesh, params["coarse"], gap)
+                      == (d.tol, d.safety, dmesh, d.coarse, d.gap_tol))
         rows.append(dict(problem=problem, coarse=params["coarse"], mesh=mesh, tol=tol,
-                         safety=safety, default="yes" if is_default else "", **res))
-        print(f"  {problem} tol {tol:g} safety {safety:g} mesh {mesh}: {res['wall_s']:.2f} s, "
+                         safety=safety, gap_tol=gap, default="yes" if is_default else "", **res))
+        print(f"  {problem} tol {tol:g} safety {safety:g} mesh {mesh} gap_tol {gap:g}: "
+              f"{res['wall_s']:.2f} s, "
               f"{res['iterations']} it, err {res['err']:.3g} {res['status'][:80]}", flush=True)
     report(rows, f"front_{problem}{params['tag']}", f"{problem}: wall time against error "
            f"(err threshold {params['threshold']:g})")
@@ -330,13 +335,14 @@ def sweep(problem, params):
 
 def describe(r):
     """One line: setting, error, cost of a table row."""
-    return (f"tol {r['tol']:g}, safety {r['safety']:g}, mesh {r['mesh']}: err {r['err']:.3g}, "
+    return (f"tol {r['tol']:g}, safety {r['safety']:g}, mesh {r['mesh']}, gap_tol "
+            f"{r['gap_tol']:g}: err {r['err']:.3g}, "
             f"{r['wall_s']:.2f} s, {r['iterations']} iterations")
 
 
 def plot(rows, problem, threshold, best):
     """out/front_<problem>.png: wall time against err, log-log, one colour per mesh and one
-    marker per safety factor, each point labelled with its tolerance."""
+    marker per safety factor, each point labelled with its tolerance (and gap_tol if set)."""
     from matplotlib.figure import Figure
     fig = Figure(figsize=(8.5, 5))
     ax = fig.add_subplot()
@@ -350,7 +356,8 @@ def plot(rows, problem, threshold, best):
         m = markers[safeties.index(r["safety"]) % len(markers)]
         x = max(r["err"], 1e-12)
         ax.loglog(x, r["wall_s"], m, color=c, ms=5)
-        ax.annotate(f"{r['tol']:g}", (x, r["wall_s"]), fontsize=6, xytext=(3, 2),
+        label = f"{r['tol']:g}" + (f" gap {r['gap_tol']:g}" if r["gap_tol"] else "")
+        ax.annotate(label, (x, r["wall_s"]), fontsize=6, xytext=(3, 2),
                     textcoords="offset points")
         if r["default"]:
             ax.loglog(x, r["wall_s"], "o", mfc="none", mec="red", ms=14, mew=1.5)
