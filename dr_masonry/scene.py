@@ -37,8 +37,9 @@ RUN_PARAMS = dict(
     stall_iter=10_000,      # iterations without 10 % progress before an attempt is cut
                             # (SolverOptions; 0: never)
     floor_tol=0.0,          # accept a stalled increment at this residual (SolverOptions; 0: off)
-    gap_tol=0.0,            # ... only if its out-of-balance resultant is at most this fraction
-                            # of the driving force (SolverOptions; 0: off)
+    gap_tol=0.0,            # converge (and accept at the floor) only with the out-of-balance
+                            # resultant at most this fraction of the driving force
+                            # (SolverOptions; 0: off)
     block_tol=0.1,          # every block balanced to this fraction of its forces (SolverOptions)
     frames=5,               # write a field frame every this many increments (and at each
                             # turning point of a cyclic path)

@@ -101,8 +101,7 @@ I_BLOCK = 25      # largest block imbalance ratio at exit (:func:`block_imbalanc
 I_BLOCK_ID = 26   # the block that has it
 I_GAP_TOL = 27    # largest out-of-balance resultant ratio accepted (set by the caller; 0: not a
                   # criterion; :func:`resultant`)
-I_GAP = 28        # that ratio at the last check
-N_INFO = 29
+N_INFO = 28
 
 # kinds of place a guard names (info[I_KIND])
 WHERE_NODE = 0
@@ -551,7 +550,7 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, ring, tol, ref
         most ``info[I_BLOCK_TOL]``; the stall and rate tests below then follow the larger of the
         residual ratio and the block ratio scaled by tol / ``info[I_BLOCK_TOL]``; likewise, with
         ``info[I_GAP_TOL]`` > 0, the out-of-balance resultant's ratio (:func:`resultant`) must
-        be at most ``info[I_GAP_TOL]`` (``info[I_GAP]``: its value at the last check).
+        be at most ``info[I_GAP_TOL]``.
     max_iter : int
         iterations of this call at most (ST_MAXITER when they run out).
     check_every : int
@@ -623,7 +622,6 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, ring, tol, ref
     last_check = seg
     block_tol = info[I_BLOCK_TOL]
     gap_tol = info[I_GAP_TOL]
-    gap = info[I_GAP]
     if seg == 0:
         dyn.ring[:] = 0.0
     hbuf = mesh.fbuf.reshape((-1, 3))
@@ -663,8 +661,7 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, ring, tol, ref
                 done = done and rb <= tol
                 ratio = max(ratio, rb)
             if gap_tol > 0.0:   # the resultant too, scaled the same way
-                gap = resultant(dyn, lam, rpres)[0]
-                rg = tol * gap / gap_tol
+                rg = tol * resultant(dyn, lam, rpres)[0] / gap_tol
                 done = done and rg <= tol
                 ratio = max(ratio, rg)
             if done and its > 1:
@@ -844,7 +841,6 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, ring, tol, ref
     info[I_RESID] = rn / max(ref, ref_floor)
     if it > 0:
         info[I_BLOCK], info[I_BLOCK_ID] = block_imbalance(cont, dyn, lam, dyn.bratio)
-    info[I_GAP] = gap
     info[I_KE] = ke
     info[I_DAMPED] = damped
     info[I_GOAL] = goal
