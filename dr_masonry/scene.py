@@ -51,7 +51,8 @@ RUN_PARAMS = dict(
                             # nearest the largest |force|; both ways of a cyclic run), peak+,
                             # peak-, end, increment numbers; "": none
     compare="",             # results file of another run of the scene drawn on the curve (e.g.
-                            # the monotonic run on the cyclic one)
+                            # the monotonic run on the cyclic one), or a CSV of the curve's two
+                            # columns in its plotted units (measured or published points)
 )
 #: scene parameters that are :class:`SolverOptions` fields of the same name
 OPTION_KEYS = ("tol", "damping", "coarse", "max_dissipation", "redetect", "max_iter", "max_cuts",
@@ -307,22 +308,47 @@ def write_maps(sim, params, out, views, x, force, rows):
 
 
 def _compare_path(params):
-    """The results file of scene parameter ``compare`` (None when empty), checked to exist."""
+    """The results file or CSV of scene parameter ``compare`` (None when empty), checked to
+    exist."""
     path = params.get("compare")
     if path and not os.path.exists(path):
-        raise ParameterError(f"parameter compare={path!r}: no such results file")
+        raise ParameterError(f"parameter compare={path!r}: no such "
+                             + ("file" if path.lower().endswith(".csv") else "results file"))
     return path or None
+
+
+def _reference_csv(path):
+    """(x, y, label) of a reference curve stored as CSV: ``#`` comment lines (the source), a
+    header line, then two columns in the plotted units (mm, kN); label: the file's name."""
+    with open(path) as f:
+        rows = [ln for ln in f if ln.strip() and not ln.lstrip().startswith("#")][1:]
+    try:
+        xy = np.loadtxt(rows, delimiter=",", ndmin=2) if rows else np.empty((0, 2))
+    except ValueError as e:
+        raise ParameterError(f"parameter compare={path!r}: not a CSV of numbers ({e})") from None
+    if xy.shape[1] != 2 or len(xy) < 2:
+        raise ParameterError(f"parameter compare={path!r}: needs two columns (x, y in the "
+                             f"plotted units) and at least 2 rows after its header, has "
+                             f"{len(xy)} rows of {xy.shape[1]} columns")
+    bad = np.flatnonzero(~np.all(np.isfinite(xy), axis=1))
+    if bad.size:
+        raise ParameterError(f"parameter compare={path!r}: data row {bad[0] + 1} is "
+                             f"{rows[bad[0]].strip()!r}, not finite")
+    return xy[:, 0], xy[:, 1], os.path.basename(path)
 
 
 def compare_curve(params, first_stage, curve, xscale=1.0 / mm, yscale=1.0 / kN):
     """The reference line (x, y, label) of scene parameter ``compare`` (None when empty): the
     results file's push rows (increment above its parameter ``first_stage``, the increments of
     the stage before the push) through ``curve(history, rows) -> (x, y)`` (SI), times
-    ``xscale``, ``yscale`` (default mm and kN)."""
+    ``xscale``, ``yscale`` (default mm and kN); a ``.csv`` file: its points as they are
+    (:func:`_reference_csv`)."""
     from .results import open_result
     path = _compare_path(params)
     if path is None:
         return None
+    if path.lower().endswith(".csv"):
+        return _reference_csv(path)
     r = open_result(path)
     if first_stage not in r.config:
         raise ParameterError(f"parameter compare={path!r}: not a run of this scene (its "

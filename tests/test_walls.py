@@ -340,6 +340,22 @@ def test_main_writes_outputs(tmp_path):
         compare_curve({"compare": str(tmp_path / "none.h5")}, "pre_increments", squat_wall.curve)
     with pytest.raises(ParameterError, match="not a run of this scene .*gravity_increments"):
         compare_curve({"compare": str(out) + ".h5"}, "gravity_increments", squat_wall.curve)
+    # or a CSV of points in the plotted units (a measured or published curve), checked
+    ref = tmp_path / "test.csv"
+    ref.write_text("# source\ntop (mm),shear (kN)\n0,0\n# a note\n1.5,20.25\n3,18\n")
+    x, y, label = compare_curve({"compare": str(ref)}, "pre_increments", squat_wall.curve)
+    np.testing.assert_array_equal(x, [0, 1.5, 3])
+    np.testing.assert_array_equal(y, [0, 20.25, 18])
+    assert label == "test.csv"
+    for text, match in (("x,y\n1,2\n", "at least 2 rows after its header, has 1 rows"),
+                        ("x,y\n1,2,3\n4,5,6\n", "has 2 rows of 3 columns"),
+                        ("x,y\n1,2\n2,nan\n", "data row 2 is '2,nan', not finite"),
+                        ("x,y\n1,2\n2,kN\n", "not a CSV of numbers")):
+        ref.write_text(text)
+        with pytest.raises(ParameterError, match=match):
+            compare_curve({"compare": str(ref)}, "pre_increments", squat_wall.curve)
+    with pytest.raises(ParameterError, match="compare=.*none.csv.*no such file"):
+        compare_curve({"compare": str(tmp_path / "none.csv")}, "pre_increments", squat_wall.curve)
 
 
 def test_map_points_and_frames():
