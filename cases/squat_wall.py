@@ -29,7 +29,8 @@ increments to 1 % drift: 30 put the peak 5.7 % low, BENCHMARKS.md section 11) to
 on 2 cores (2026-12-02, warm kernel cache; 64 increments, no cut, 115,610 iterations, 116 s of
 relaxation; section 51);
 ``mesh=fine`` (CASES.md's 4 x 1 x 2 hexahedra per brick, 20000 nodes) costs about 3 times more
-per iteration and took 22 min 43 s alone on 2 cores (section 51).
+per iteration and took 22 min 43 s alone on 2 cores (section 51); with ``floor_tol=1e-3
+stall_iter=3000`` 12 min 11 s for the same peak and end force (section 59).
 The energy balance error of these coarse increments reaches a few per cent (trapezoidal rule of
 the external work over large steps; it shrinks with the step, see tests/test_walls.py).
 ``fast=true`` runs a 0.88 x 0.81 m coarse wall in a few increments (test suite). The full
