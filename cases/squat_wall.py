@@ -26,8 +26,8 @@ its fracture energy; all of these), ``shear_damage=paper`` the literal eq. (7) o
 Run: ``python cases/squat_wall.py [key=value ...]`` (or ``dr-masonry run squat_wall``). The
 default, coarse monotonic run (one hexahedron per brick, 5260 nodes, 5036 contacts; 60 graded
 increments to 1 % drift: 30 put the peak 5.7 % low, BENCHMARKS.md section 11) took 2 min 01 s
-on 2 cores (2026-12-02, warm kernel cache; 64 increments, no cut, 115,610 iterations, 116 s of
-relaxation; section 51);
+on 2 cores beside another run (2026-12-02, warm kernel cache; 64 increments, no cut, 115,610
+iterations, 116 s of relaxation; section 51);
 ``mesh=fine`` (CASES.md's 4 x 1 x 2 hexahedra per brick, 20000 nodes) costs about 3 times more
 per iteration and took 22 min 43 s alone on 2 cores (section 51); with ``floor_tol=1e-3
 stall_iter=3000`` 12 min 11 s for the same peak and end force (section 59).
