@@ -25,8 +25,7 @@ from .kernels.forces import Cont, Mesh
 from .kernels.hex8 import (corot_tables, hex_geometry_shared, inverted_element, lumped_mass,
                            pristine_elements, stiffness_rowsum)
 from .kernels.joint_law import JS_D, JS_DISS, JS_DISSF
-from .kernels.plastic_damage import (FLAG_RETURN, MP_ELASTIC, MP_HMAX, MS_DC, MS_DISS, MS_DT,
-                                     MS_FLAG)
+from .kernels.plastic_damage import FLAG_RETURN, MP_HMAX, MS_DC, MS_DISS, MS_DT, MS_FLAG
 from .materials import JointLaw, PlasticDamage
 from .model import Model, ModelError, id_array, quad_area_vector
 from .options import COARSE_MIN_BLOCKS, DAMPING, OptionsError, SolverOptions
@@ -310,9 +309,8 @@ class Simulation:
         s_old = np.ascontiguousarray(np.repeat(s0[:, None, :], 8, axis=1))
         ptr, rows = node_row_map(conn, n)
         self._s_virgin = s0
-        # elastic materials: corotational linear elements (one stiffness per brick shape)
-        corot = corot_tables(X, conn, dN, geo, wdet, emat, mparams,
-                             active[mparams[emat[active], MP_ELASTIC] == 1.0])
+        # corotational elements (one stiffness and strain table per brick shape and material)
+        corot = corot_tables(X, conn, dN, geo, wdet, emat, mparams, active)
         self.mesh = Mesh(conn, active, dN, geo, wdet, h, emat, mparams, s_old, s_old.copy(),
                          np.zeros(conn.shape[0], np.uint8), np.zeros(conn.shape[0], np.uint8),
                          *corot, np.zeros((conn.shape[0], 8, 3)), np.zeros(conn.shape[0]), ptr,

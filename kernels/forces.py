@@ -20,7 +20,7 @@ from .joint_law import NJP, NJS
 from .plastic_damage import NMS
 
 Mesh = namedtuple("Mesh", "conn active dN geo wdet h emat mparams s_old s_new pristine dirty ke "
-                         "kxo kdn kid fbuf energy ptr rows")
+                         "kbt kxo kdn kid fbuf energy ptr rows")
 Cont = namedtuple("Cont", "slave master xi area law lparams gap0 s_old s_new gaps trac fbuf psi ptr rows")
 
 
@@ -42,8 +42,8 @@ def element_and_contact_forces(X, U, mesh, cont):
             hc = j - 1
             hex_chunk(hc * HEX_CHUNK, min(na, (hc + 1) * HEX_CHUNK), U, mesh.conn, mesh.active,
                       mesh.dN, mesh.geo, mesh.wdet, mesh.h, mesh.emat, mesh.mparams,
-                      mesh.s_old, mesh.s_new, mesh.pristine, mesh.dirty, mesh.ke, mesh.kxo,
-                      mesh.kdn, mesh.kid, mesh.fbuf, mesh.energy)
+                      mesh.s_old, mesh.s_new, mesh.pristine, mesh.dirty, mesh.ke, mesh.kbt,
+                      mesh.kxo, mesh.kdn, mesh.kid, mesh.fbuf, mesh.energy)
         else:
             c = t - j
             contact_chunk(c * CONTACT_CHUNK, min(nc, (c + 1) * CONTACT_CHUNK), X, U,
@@ -58,8 +58,9 @@ def _none(*shape, dtype=np.float64):
 
 
 def no_corot(ne):
-    """Corotational tables (ke, kxo, kdn, kid) of ``ne`` elements none of which uses them."""
-    return (_none(0, 24, 24), _none(0, 8, 3), _none(0, 8, 3), np.full(ne, -1, dtype=np.int64))
+    """Corotational tables (ke, kbt, kxo, kdn, kid) of ``ne`` elements none of which uses them."""
+    return (_none(0, 24, 24), _none(0, 24, 48), _none(0, 8, 3), _none(0, 8, 3),
+            np.full(ne, -1, dtype=np.int64))
 
 
 #: an empty contact set and an empty element set (the other argument of the force kernel)
@@ -128,11 +129,15 @@ def hex_forces(U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old, s_new
         element internal forces, written.
     energy : (ne,) float64, J
         stored elastic energy sum_g wdet 0.5 S : (E - E_p), written (E_p = 0 for a
-        material with ``p[MP_ELASTIC] == 1``; d.K d / 2 on the corotational path).
+        material with ``p[MP_ELASTIC] == 1``; on the corotational path the local strains for
+        E and the stresses for S, d.K d / 2 where the element is elastic).
     corot : tuple, optional
-        ``(ke, kxo, kdn, kid)`` of :func:`.hex8.corot_tables`: elements with ``kid >= 0`` take the
-        corotational linear path (:func:`.hex8.corot_local`; what a run does for elastic
-        materials). None: every element at its Gauss points (total Lagrangian).
+        ``(ke, kbt, kxo, kdn, kid)`` of :func:`.hex8.corot_tables`: elements with ``kid >= 0``
+        take the corotational path (:func:`.hex8.corot_local`; what a run does for every
+        element): linear in the element's rotated frame, K d for an elastic material, the
+        Gauss-point update of the linear local strains for a damaging one
+        (:func:`.hex8.corot_damaging`). None: every element at its Gauss points (total
+        Lagrangian).
     """
     element_and_contact_forces(*hex_only_args(U, conn, active, dN, geo, wdet, h, elem_mat, params,
                                               s_old, s_new, pristine, dirty, f_elem, energy,

@@ -1,4 +1,4 @@
-"""Total-Lagrangian 8-node hexahedron: geometry, internal forces, lumped mass, stiffness bound.
+"""8-node hexahedron: geometry, internal forces, lumped mass, stiffness bound.
 
 Conventions
 -----------
@@ -11,10 +11,14 @@ Conventions
   :func:`hex_geometry` gives one table per element (``geo = arange(ne)``, for tests and
   reference solutions).
   ``wdet`` (ne, 8) m^3: Gauss weight x det(dX/dxi), per element.
-* Deformation gradient F = I + sum_a u_a (x) dN_a; Green-Lagrange strain
-  E = (H + H^T + H^T H) / 2 with H = F - I (no cancellation at small strain), Voigt order
-  [xx, yy, zz, yz, xz, xy] with engineering shears; the material returns the second
-  Piola-Kirchhoff stress S (Pa) in the same order; nodal internal force
+* Runs compute every element as a corotational hexahedron (:func:`corot_local`): linear in the
+  frame of the rotation of its mean deformation gradient, K d for an elastic material
+  (:func:`corot_global`), the Gauss-point update of the linear local strains for a damaging one
+  (:func:`corot_damaging`); tables by :func:`corot_tables`.
+* Without tables (tests' reference) an element is total-Lagrangian: F = I + sum_a u_a (x) dN_a,
+  Green-Lagrange strain E = (H + H^T + H^T H) / 2 with H = F - I (no cancellation at small
+  strain), Voigt order [xx, yy, zz, yz, xz, xy] with engineering shears; the material returns
+  the second Piola-Kirchhoff stress S (Pa) in the same order; nodal internal force
   f_a = sum_g wdet_g F S dN_a (N).
 """
 import numpy as np
@@ -309,18 +313,20 @@ def hex_add_gauss_force(F, sig, dng, w, fe):
 
 @ijit
 def hex_chunk(lo, hi, U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old, s_new, pristine,
-              dirty, ke, kxo, kdn, kid, f_elem, energy):
+              dirty, ke, kbt, kxo, kdn, kid, f_elem, energy):
     """Elements ``active[lo:hi]`` of :func:`.forces.hex_forces` (one parallel task, its own scratch)."""
     ue = np.empty((8, 3))
     F = np.empty((3, 3))
     eps = np.empty(6)
     sig = np.empty(6)
-    # corotational elements: local displacements, rotations and table of each slot of the task
+    # corotational elements: local displacements, rotations and table of each slot of the task,
+    # and the Gauss-point strains of the damaging ones
     ns = hi - lo if ke.shape[0] > 0 else 0   # no scratch where no element uses the path
     dl = np.empty((ns, 24))
     fl = np.empty((ns, 24))
     rot = np.empty((ns, 3, 3))
     slot = np.full(ns, -1, dtype=np.int64)
+    strains = np.empty((ns if kbt.shape[0] > 0 else 0, 48))
     for k in range(lo, hi):
         e = active[k]
         fe = f_elem[e]
@@ -330,7 +336,7 @@ def hex_chunk(lo, hi, U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old
                 ue[a, i] = U[n, i]
                 fe[a, i] = 0.0
         t = kid[e]
-        if t >= 0:   # elastic material: corotational linear element, its K d below
+        if t >= 0:   # corotational element: K d (and the damaging ones' strains) below
             if corot_local(ue, kxo[t], kdn[t], rot[k - lo], dl[k - lo]) > 0.0:
                 slot[k - lo] = t
             else:   # inverted: NaN for the run's guards
@@ -390,10 +396,77 @@ def hex_chunk(lo, hi, U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old
             j1 += 1
         if t >= 0:
             np.dot(dl[j:j1], ke[t], fl[j:j1])   # K symmetric: (K d)^T = d^T K
-            for jj in range(j, j1):
-                e = active[lo + jj]
-                energy[e] = corot_global(rot[jj], dl[jj], fl[jj], f_elem[e])
+            p = params[elem_mat[active[lo + j]]]   # a table's elements share one material
+            if p[MP_ELASTIC] == 1.0:
+                for jj in range(j, j1):
+                    e = active[lo + jj]
+                    energy[e] = corot_global(rot[jj], dl[jj], fl[jj], f_elem[e])
+            else:
+                np.dot(dl[j:j1], kbt[t], strains[j:j1])   # the 8 points' strains B_g d
+                for jj in range(j, j1):
+                    e = active[lo + jj]
+                    fast = pristine[e] != 0   # virgin committed state
+                    if fast and corot_surely_elastic(p, strains[jj]):   # K d, no state
+                        energy[e] = corot_global(rot[jj], dl[jj], fl[jj], f_elem[e])
+                        if dirty[e] != 0:   # trial state = committed state again
+                            s_new[e] = s_old[e]
+                            dirty[e] = 0
+                    else:
+                        energy[e] = corot_damaging(p, h[e], s_old[e], s_new[e], dN[geo[e]],
+                                                   wdet[e], strains[jj], rot[jj], f_elem[e], F,
+                                                   eps, sig, ue)
+                        if fast:
+                            dirty[e] = 1
         j = j1
+
+
+@ijit
+def corot_surely_elastic(p, strains):
+    """Whether all 8 Gauss points of a virgin corotational element of material ``p`` are surely
+    elastic at local strains ``strains`` (48,) (Voigt, engineering shears, point g at 6 g)."""
+    for g in range(8):
+        o = 6 * g
+        i1, q, _, _, _, _, _, _ = trial_stress(p, strains[o], strains[o + 1], strains[o + 2],
+                                               strains[o + 3], strains[o + 4], strains[o + 5])
+        if not surely_elastic(p, i1, q, p[MP_SBT0], p[MP_SBC0]):
+            return False
+    return True
+
+
+# a call, not inlined: inlined it added 2.5 s to the cold compile to save the call's 80 ns of a
+# damaged element's 1,000 in its elastic range (19,000 in plastic flow), within the noise of whole
+# runs (BENCHMARKS.md section 61)
+@jit
+def corot_damaging(p, he, s_old_e, s_new_e, dne, we, strains, R, fe, eye, eps, sig, floc):
+    """Forces ``fe`` (8, 3) N of one corotational element of a damaging material.
+
+    In the element's rotated frame (:func:`corot_local`: rotation ``R``) the strain of Gauss
+    point g is linear, ``strains[6 g:6 g + 6]`` = B_g d (Voigt, engineering shears); the
+    material updates it (``gp_update``: committed states ``s_old_e`` (8, NMS), trial
+    ``s_new_e``, written) and the local forces sum_g w_g B_g^T sigma_g (``dne`` (8, 8, 3) 1/m,
+    ``we`` (8,) m^3) turn back with ``R``. Scratch: ``eye`` (3, 3) (set to I here), ``eps``,
+    ``sig`` (6,), ``floc`` (8, 3). Returns the stored energy, J.
+    """
+    for i in range(3):
+        for k in range(3):
+            eye[i, k] = 1.0 if i == k else 0.0
+    floc[:, :] = 0.0
+    en = 0.0
+    for g in range(8):
+        for m in range(6):
+            eps[m] = strains[6 * g + m]
+        sn = s_new_e[g]
+        gp_update(p, he, eps, s_old_e[g], sn, sig)
+        acc = 0.0
+        for m in range(6):
+            acc += sig[m] * (eps[m] - sn[MS_EPSP + m])
+        hex_add_gauss_force(eye, sig, dne[g], we[g], floc)
+        en += 0.5 * we[g] * acc
+    for a in range(8):
+        g0, g1, g2 = floc[a, 0], floc[a, 1], floc[a, 2]
+        for i in range(3):
+            fe[a, i] = R[i, 0] * g0 + R[i, 1] * g1 + R[i, 2] * g2
+    return en
 
 
 def pristine_elements(s_old, s_virgin, h, h_max):
@@ -408,7 +481,7 @@ def pristine_elements(s_old, s_virgin, h, h_max):
     return (virgin & (h > 0.0) & (h <= h_max)).astype(np.uint8)
 
 
-# ---------------------------------------------------------------------------- corotational elastic elements
+# ---------------------------------------------------------------------------- corotational elements
 #: change of the rotation's largest entry that ends the polar iteration: the iteration converges
 #: quadratically, so the step after a change of 1e-9 is at rounding level
 POLAR_TOL = 1e-9
@@ -493,15 +566,18 @@ def corot_global(R, dl, fl, fe):
 
 
 def corot_tables(X, conn, dN, geo, wdet, elem_mat, params, elems):
-    """Tables of the corotational path (:func:`corot_local`, :func:`corot_global`) for the elements ``elems``.
+    """Tables of the corotational path (:func:`corot_local`, :func:`corot_global`,
+    :func:`corot_damaging`) for the elements ``elems``.
 
     One table per distinct (geometry table, material) pair. ``X`` (n_nodes, 3) m; ``conn``,
     ``dN``, ``geo``, ``wdet`` as for :func:`.forces.hex_forces`; ``elem_mat`` (ne,) rows of
     ``params`` (nmat, NMP), whose ``MP_E``, ``MP_NU`` give the stiffness; ``elems`` int ids.
 
-    Returns ``ke`` (nk, 24, 24) N/m, ``kxo`` (nk, 8, 3) m, ``kdn`` (nk, 8, 3) 1/m and ``kid``
-    (ne,) int64: the table of each element, -1 outside ``elems`` (those keep the Gauss-point
-    path).
+    Returns ``ke`` (nk, 24, 24) N/m, ``kbt`` (nk, 24, 48) 1/m, ``kxo`` (nk, 8, 3) m, ``kdn``
+    (nk, 8, 3) 1/m and ``kid`` (ne,) int64: the table of each element, -1 outside ``elems``
+    (those keep the total-Lagrangian Gauss-point path). ``kbt`` maps local displacements to the
+    Gauss-point strains, ``strains[6 g + m] = sum_r d[r] kbt[r, 6 g + m]`` (Voigt, engineering
+    shears); all zero for a table of an elastic material (never read).
     """
     ne = conn.shape[0]
     elems = np.asarray(elems, dtype=np.int64)
@@ -511,6 +587,7 @@ def corot_tables(X, conn, dN, geo, wdet, elem_mat, params, elems):
     kid[elems] = inv.ravel()
     nk = first.size
     ke = np.empty((nk, 24, 24))
+    kbt = np.zeros((nk, 24, 48))
     kxo = np.empty((nk, 8, 3))
     kdn = np.empty((nk, 8, 3))
     for k, j in enumerate(first):
@@ -518,9 +595,28 @@ def corot_tables(X, conn, dN, geo, wdet, elem_mat, params, elems):
         t = geo[e]
         p = params[elem_mat[e]]
         hex_stiffness(dN[t], wdet[e], p[MP_E], p[MP_NU], ke[k])
+        if p[MP_ELASTIC] != 1.0:
+            strain_operator(dN[t], kbt[k])
         kxo[k] = X[conn[e]] - X[conn[e, 0]]
         kdn[k] = np.einsum("g,gai->ai", wdet[e], dN[t]) / wdet[e].sum()
-    return ke, kxo, kdn, kid
+    return ke, kbt, kxo, kdn, kid
+
+
+def strain_operator(dne, kbt):
+    """Write the transposed strain-displacement matrices of the 8 Gauss points into ``kbt``
+    (24, 48) 1/m: column 6 g + m is strain m (Voigt [xx, yy, zz, yz, xz, xy], engineering
+    shears) of point g, row 3 a + i displacement i of node a; ``dne`` (8, 8, 3) 1/m."""
+    for g in range(8):
+        for a in range(8):
+            d0, d1, d2 = dne[g, a]
+            c = 6 * g
+            r = 3 * a
+            kbt[r, c] = d0
+            kbt[r + 1, c + 1] = d1
+            kbt[r + 2, c + 2] = d2
+            kbt[r + 1, c + 3], kbt[r + 2, c + 3] = d2, d1
+            kbt[r, c + 4], kbt[r + 2, c + 4] = d2, d0
+            kbt[r, c + 5], kbt[r + 1, c + 5] = d1, d0
 
 
 # ---------------------------------------------------------------------------- mass

@@ -68,7 +68,8 @@ def test_fused_forces_equal_the_two_kernels(n_blocks):
         else:
             a[:] = np.nan
     hex_forces(d.U, m.conn, m.active, m.dN, m.geo, m.wdet, m.h, m.emat, m.mparams, m.s_old,
-               m.s_new, m.pristine, m.dirty, m.fbuf, m.energy, corot=(m.ke, m.kxo, m.kdn, m.kid))
+               m.s_new, m.pristine, m.dirty, m.fbuf, m.energy,
+               corot=(m.ke, m.kbt, m.kxo, m.kdn, m.kid))
     contact_forces(d.X, d.U, c.slave, c.master, c.xi, c.area, c.law, c.lparams, c.gap0, c.s_old,
                    c.s_new, c.gaps, c.trac, c.fbuf, c.psi)
     for a, b in zip(fused, outputs):
