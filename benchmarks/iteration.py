@@ -1,21 +1,21 @@
 """One dynamic-relaxation iteration of the main job's wall, by thread count and OpenMP wait policy.
 
-Builds the coarse S5 wall of ``dr-masonry run squat_wall``, runs ``rows`` push rows to reach a
-state with damaged joints (or, with ``file=<run>.h5 scene=<name>``, takes the state of a stored
-run's checkpoint, e.g. the half house of ``terraced_house`` on its rocking plateau), then times
-``relax`` for ``iters`` iterations with tol 0 (``repeats`` batches; best and median per
-iteration, and the best per node) and its parallel pieces: ``element_and_contact_forces``
+Builds the S5 wall of ``dr-masonry run squat_wall`` (``mesh=fine``: CASES.md's mesh), runs ``rows``
+push rows to reach a state with damaged joints (or, with ``file=<run>.h5 scene=<name>``, takes the
+state of a stored run's checkpoint, e.g. the half house of ``terraced_house`` on its rocking
+plateau), then times ``relax`` for ``iters`` iterations with tol 0 (``repeats`` batches; best and
+median per iteration, and the best per node) and its parallel pieces: ``element_and_contact_forces``
 (hexahedra and contact points, one region), ``gather_pair`` (node forces, one region) and
 ``internal_forces`` (both, plus the energy sums); ``rest`` = iteration - internal forces (the
-residual, damping and update passes over the nodes and the serial remainder, BENCHMARKS.md
-section 35); ``forces_full_update``: the forces again with every element through the full
-Gauss-point state update (the pristine elements' skip switched off); ``hexahedra`` and
-``contacts``: the two halves of the force kernel alone (the other set empty), also
-per hexahedron and per contact point. Every (threads, policy) setting runs in a process of its
-own, since OpenMP reads ``OMP_WAIT_POLICY`` when it starts. BENCHMARKS.md sections 16 and 38.
+residual, damping and update passes over the nodes and the serial remainder, BENCHMARKS.md section
+35); ``forces_full_update``: the forces again with every element through the full state update (the
+pristine elements' skip switched off); ``hexahedra`` and ``contacts``: the two halves of the force
+kernel alone (the other set empty), also per hexahedron and per contact point. Every (threads,
+policy) setting runs in a process of its own, since OpenMP reads ``OMP_WAIT_POLICY`` when it starts.
+BENCHMARKS.md sections 16 and 38.
 
-Run: ``python benchmarks/iteration.py [threads=1,2 policies=PASSIVE,ACTIVE rows=8 iters=400
-repeats=15 file= scene= tag=]`` (about 1 min per setting); writes
+Run: ``python benchmarks/iteration.py [threads=1,2 policies=PASSIVE,ACTIVE rows=8 mesh=coarse
+iters=400 repeats=15 file= scene= tag=]`` (about 1 min per setting); writes
 ``benchmarks/out/iteration<tag>.csv``.
 """
 import json
@@ -29,6 +29,7 @@ PARAMS = dict(
     threads="1,2",
     policies="PASSIVE,ACTIVE",
     rows=8,          # push rows before the timing (the main job peaks at row 16)
+    mesh="coarse",   # the S5 wall's mesh: coarse (the main job's) or fine (CASES.md's 4 x 1 x 2)
     iters=400,       # iterations per timed batch
     repeats=15,
     mode="all",      # "all", or "child" (one setting, used by the subprocesses)
@@ -48,7 +49,7 @@ def child(params):
         sim, _, copy = stored_run(params["scene"], params["file"], "iteration_state")
         sim.resume(copy)
     else:
-        sim = wall_state(params["rows"])
+        sim = wall_state(params["rows"], params["mesh"])
     m, c, d, o = sim.mesh, sim.cont, sim.dyn, sim.options
     info = np.zeros(R.N_INFO)
     n = params["iters"]
@@ -93,12 +94,13 @@ def child(params):
     print(json.dumps(out), flush=True)
 
 
-def wall_state(rows):
-    """The main job's coarse S5 wall after ``rows`` push rows (a state with damaged joints)."""
+def wall_state(rows, mesh):
+    """The main job's S5 wall with ``mesh`` after ``rows`` push rows (a state with damaged
+    joints)."""
     from cases import squat_wall
     from dr_masonry import Stage
-    p = dict(squat_wall.PARAMS, out=os.path.join(ROOT, "benchmarks", "out", "iteration"),
-             h5=None, progress=False)
+    p = dict(squat_wall.PARAMS, mesh=mesh, h5=None, progress=False,
+             out=os.path.join(ROOT, "benchmarks", "out", "iteration"))
     sim, stages = squat_wall.build(p)
     push = stages[1].controls[0]
     push.path = push.path[:rows]
@@ -115,7 +117,8 @@ def main(argv=None):
         for threads in params["threads"].split(","):
             env = dict(os.environ, OMP_WAIT_POLICY=policy, NUMBA_NUM_THREADS=threads)
             rows.append(child_row(__file__, ["mode=child"] + [
-                f"{k}={params[k]}" for k in ("rows", "iters", "repeats", "file", "scene")], env))
+                f"{k}={params[k]}"
+                for k in ("rows", "mesh", "iters", "repeats", "file", "scene")], env))
             print(f"  {policy} x {threads}: {rows[-1]['iteration_us_median']:.0f} us per "
                   f"iteration (median)", flush=True)
     what = f"{params['scene']} ({params['file']})" if params["file"] else "S5"

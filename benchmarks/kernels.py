@@ -3,10 +3,12 @@
 Measures, on in-plane running-bond walls of the reference brick (mesh 4 x 2 x 1 per brick:
 along, thickness, height) built by ``dr_masonry.geometry.add_wall``:
 
-* ``hex_forces`` (the force kernel with no contact points): ns per element-step, elastic material (``PlasticDamage.elastic``: the
-  corotational elements of a run, and the same material at its Gauss points) and the
-  reference plastic-damage material, with strains in the elastic range and with strains that make
-  every Gauss point plastic and damaged (the fraction of damaged Gauss points is printed);
+* ``hex_forces`` (the force kernel with no contact points): ns per element-step, elastic material
+  (``PlasticDamage.elastic``) and the reference plastic-damage material, with strains in the
+  elastic range (virgin elements skipping the state, and through the full state update) and with
+  strains that make every Gauss point plastic and damaged (the fraction of damaged Gauss points
+  is printed); each as the corotational element of a run and, for comparison, as the
+  total-Lagrangian element at its Gauss points (``hex_forces`` without tables);
 * ``contact_forces`` (the force kernel with no elements): ns per contact-point-step, joints elastic and joints damaged (opened);
 * ``relax``: a full dynamic-relaxation iteration (viscous damping, gravity load, ``tol=0`` so it
   runs ``relax_iters`` iterations), ns per element-iteration;
@@ -96,7 +98,7 @@ def hex_args(sim, U, elastic, virgin=True):
 
 
 def corot(sim, args):
-    """The corotational tables that a run gives the elements of ``hex_args``' elastic material."""
+    """The corotational tables that a run gives the elements of ``hex_args``."""
     from dr_masonry.kernels.hex8 import corot_tables
     conn, dN, geo, wdet, emat, params = (args[i] for i in (1, 3, 4, 5, 7, 8))
     return corot_tables(sim.model.nodes, conn, dN, geo, wdet, emat, params,
@@ -153,9 +155,14 @@ def steady(params):
         for label, elastic, strain, virgin in (
                 ("hex elastic material (corotational)", True, ELASTIC_STRAIN, True),
                 ("hex elastic material, Gauss points", True, ELASTIC_STRAIN, True),
-                ("hex reference, elastic range", False, ELASTIC_STRAIN, True),
-                ("hex reference, elastic range, full update", False, ELASTIC_STRAIN, False),
-                ("hex reference, plastic+damaged", False, PLASTIC_STRAIN, True)):
+                ("hex reference, elastic range (corotational)", False, ELASTIC_STRAIN, True),
+                ("hex reference, elastic range, Gauss points", False, ELASTIC_STRAIN, True),
+                ("hex reference, elastic range, full update (corotational)", False,
+                 ELASTIC_STRAIN, False),
+                ("hex reference, elastic range, full update, Gauss points", False,
+                 ELASTIC_STRAIN, False),
+                ("hex reference, plastic+damaged (corotational)", False, PLASTIC_STRAIN, True),
+                ("hex reference, plastic+damaged, Gauss points", False, PLASTIC_STRAIN, True)):
             args = hex_args(sim, displacement(sim, strain, 0.0), elastic, virgin)
             fn, call = hex_call(args, corot(sim, args) if "corotational" in label else None)
             fn(*call)
