@@ -8,7 +8,7 @@ Problems (``problem``, comma separated):
   ||U - U_ref|| / ||U_ref|| over all nodes against the direct sparse solve of the same mesh
   (``tests/linear_reference.py``); ``err_tip_mesh``: tip translation against the direct solve
   on ``linear_ref_mesh`` (adds the discretisation error). The load is small enough that the
-  geometric terms of the total-Lagrangian elements stay near 1e-5 of the solution.
+  geometric terms of the corotational elements stay near 1e-5 of the solution.
 * ``s2``: S2 triplet (``dr_masonry.cases.triplet``) at ``sigma`` MPa, ``s2_increments`` shear
   increments; reference: tol ``ref_tol`` on ``s2_ref_mesh``.
 * ``s5``: S5 squat wall (``dr_masonry.cases.squat_wall``), monotonic to ``drift`` % in

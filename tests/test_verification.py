@@ -35,7 +35,7 @@ def test_column_matches_direct_sparse_solve(loading):
     equals spsolve of K u = f within 1e-6 (relative, all nodal displacements).
 
     The load is applied as +F then -F and the half difference is compared: it cancels the
-    quadratic geometric terms of the total-Lagrangian elements and of the rotating contact frames
+    quadratic geometric terms of the corotational elements and of the rotating contact frames
     (the one-sided solution differs from the linear one by ~6e-5 at this load).
     """
     H = 0.081
