@@ -312,6 +312,18 @@ def hex_add_gauss_force(F, sig, dng, w, fe):
 
 
 @ijit
+def gauss_point_update(p, he, eps, s_old_e, s_new_e, g, sig):
+    """The material update of Gauss point ``g`` of an element (``gp_update``: stress ``sig`` (6,)
+    Pa and trial state ``s_new_e[g]`` written; states (8, NMS)) and twice its stored energy
+    density sigma . (eps - eps_p), J/m^3."""
+    gp_update(p, he, eps, s_old_e[g], s_new_e[g], sig)
+    acc = 0.0
+    for m in range(6):
+        acc += sig[m] * (eps[m] - s_new_e[g, MS_EPSP + m])
+    return acc
+
+
+@ijit
 def hex_chunk(lo, hi, U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old, s_new, pristine,
               dirty, ke, kbt, kxo, kdn, kid, f_elem, energy):
     """Elements ``active[lo:hi]`` of :func:`.forces.hex_forces` (one parallel task, its own scratch)."""
@@ -326,7 +338,7 @@ def hex_chunk(lo, hi, U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old
     fl = np.empty((ns, 24))
     rot = np.empty((ns, 3, 3))
     slot = np.full(ns, -1, dtype=np.int64)
-    strains = np.empty((ns if kbt.shape[0] > 0 else 0, 48))
+    strains = np.empty((ns, 48))
     for k in range(lo, hi):
         e = active[k]
         fe = f_elem[e]
@@ -373,10 +385,7 @@ def hex_chunk(lo, hi, U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old
             if not plastic:
                 elastic_stress(p, eps, sig)
             if plastic and not fast:
-                sn = s_new[e, g]
-                gp_update(p, h[e], eps, s_old[e, g], sn, sig)
-                for m in range(6):
-                    acc += sig[m] * (eps[m] - sn[MS_EPSP + m])
+                acc = gauss_point_update(p, h[e], eps, s_old[e], s_new[e], g, sig)
             else:   # elastic stress from the total strain (no plastic strain)
                 for m in range(6):
                     acc += sig[m] * eps[m]
@@ -455,13 +464,8 @@ def corot_damaging(p, he, s_old_e, s_new_e, dne, we, strains, R, fe, eye, eps, s
     for g in range(8):
         for m in range(6):
             eps[m] = strains[6 * g + m]
-        sn = s_new_e[g]
-        gp_update(p, he, eps, s_old_e[g], sn, sig)
-        acc = 0.0
-        for m in range(6):
-            acc += sig[m] * (eps[m] - sn[MS_EPSP + m])
+        en += 0.5 * we[g] * gauss_point_update(p, he, eps, s_old_e, s_new_e, g, sig)
         hex_add_gauss_force(eye, sig, dne[g], we[g], floc)
-        en += 0.5 * we[g] * acc
     for a in range(8):
         g0, g1, g2 = floc[a, 0], floc[a, 1], floc[a, 2]
         for i in range(3):
