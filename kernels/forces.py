@@ -4,8 +4,10 @@ The arrays of the two sets travel in named tuples (built by ``dr_masonry.solver`
 documented at :func:`hex_forces` and :func:`contact_forces`): ``Mesh`` (hexahedra; ``ptr``,
 ``rows`` the node map of their force rows, :func:`~.assembly.node_row_map`) and ``Cont``
 (contact points; ``ptr``, ``rows`` likewise). :func:`element_and_contact_forces` is the one force
-kernel; :func:`hex_forces` and :func:`contact_forces` call it with the other set empty, so that
-tests and benchmarks run the compiled code of a run (and compile nothing more).
+kernel; :func:`hex_forces` (with corotational tables) and :func:`contact_forces` call it with the
+other set empty, so that tests and benchmarks run the compiled code of a run (and compile nothing
+more). Without tables :func:`hex_forces` calls :func:`.hex8.gauss_forces`, the total-Lagrangian
+reference element, compiled apart.
 """
 from collections import namedtuple
 
@@ -15,7 +17,7 @@ from .config import pjit, prange
 from .contact_forces import CHUNK as CONTACT_CHUNK
 from .contact_forces import contact_chunk
 from .hex8 import CHUNK as HEX_CHUNK
-from .hex8 import hex_chunk
+from .hex8 import gauss_forces, hex_chunk
 from .joint_law import NJP, NJS
 from .plastic_damage import NMS
 
@@ -57,12 +59,6 @@ def _none(*shape, dtype=np.float64):
     return np.zeros(shape, dtype=dtype)
 
 
-def no_corot(ne):
-    """Corotational tables (ke, kbt, kxo, kdn, kid) of ``ne`` elements none of which uses them."""
-    return (_none(0, 24, 24), _none(0, 24, 48), _none(0, 8, 3), _none(0, 8, 3),
-            np.full(ne, -1, dtype=np.int64))
-
-
 #: an empty contact set and an empty element set (the other argument of the force kernel)
 NO_CONTACTS = Cont(_none(0, dtype=np.int64), _none(0, 4, dtype=np.int64), _none(0, 2), _none(0),
                    _none(0, dtype=np.int64), _none(1, NJP), _none(0, 3), _none(0, NJS),
@@ -71,16 +67,16 @@ NO_CONTACTS = Cont(_none(0, dtype=np.int64), _none(0, 4, dtype=np.int64), _none(
 NO_ELEMENTS = Mesh(_none(0, 8, dtype=np.int64), _none(0, dtype=np.int64), _none(0, 8, 8, 3),
                    _none(0, dtype=np.int64), _none(0, 8), _none(0), _none(0, dtype=np.int64),
                    _none(1, 1), _none(0, 8, NMS), _none(0, 8, NMS), _none(0, dtype=np.uint8),
-                   _none(0, dtype=np.uint8), *no_corot(0), _none(0, 8, 3), _none(0),
+                   _none(0, dtype=np.uint8), _none(0, 24, 24), _none(0, 24, 48), _none(0, 8, 3),
+                   _none(0, 8, 3), _none(0, dtype=np.int64), _none(0, 8, 3), _none(0),
                    _none(1, dtype=np.int64), _none(0, dtype=np.int64))
 
 
 def hex_only_args(U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old, s_new, pristine,
-                  dirty, f_elem, energy, corot=None):
-    """Arguments of :func:`element_and_contact_forces` for :func:`hex_forces` (same parameters):
-    (X, U, Mesh of these arrays without a node map, NO_CONTACTS). The reference coordinates are
-    read by contact points only: U stands in for them."""
-    corot = no_corot(conn.shape[0]) if corot is None else corot
+                  dirty, f_elem, energy, corot):
+    """Arguments of :func:`element_and_contact_forces` for :func:`hex_forces` with tables ``corot``
+    (same parameters): (X, U, Mesh of these arrays without a node map, NO_CONTACTS). The reference
+    coordinates are read by contact points only: U stands in for them."""
     return U, U, Mesh(conn, active, dN, geo, wdet, h, elem_mat, params, s_old, s_new, pristine,
                       dirty, *corot, f_elem, energy, NO_CONTACTS.ptr, NO_CONTACTS.rows), NO_CONTACTS
 
@@ -132,13 +128,26 @@ def hex_forces(U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old, s_new
         material with ``p[MP_ELASTIC] == 1``; on the corotational path the local strains for
         E and the stresses for S, d.K d / 2 where the element is elastic).
     corot : tuple, optional
-        ``(ke, kbt, kxo, kdn, kid)`` of :func:`.hex8.corot_tables`: elements with ``kid >= 0``
-        take the corotational path (:func:`.hex8.corot_local`; what a run does for every
-        element): linear in the element's rotated frame, K d for an elastic material, the
-        Gauss-point update of the linear local strains for a damaging one
-        (:func:`.hex8.corot_damaging`). None: every element at its Gauss points (total
-        Lagrangian).
+        ``(ke, kbt, kxo, kdn, kid)`` of :func:`.hex8.corot_tables`, a table (``kid >= 0``) for
+        every active element: each takes the corotational path of a run
+        (:func:`.hex8.corot_local`), linear in the element's rotated frame, K d for an elastic
+        material, the Gauss-point update of the linear local strains for a damaging one
+        (:func:`.hex8.corot_damaging`). None: every element at its Gauss points, total
+        Lagrangian (:func:`.hex8.gauss_forces`, the reference element).
+
+    Raises
+    ------
+    ValueError
+        if ``corot`` gives an active element no table (it would get NaN forces).
     """
+    if corot is None:
+        gauss_forces(U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old, s_new, pristine,
+                     dirty, f_elem, energy)
+        return
+    missing = active[corot[4][active] < 0]
+    if missing.size:
+        raise ValueError(f"hex_forces: element {missing[0]} (of {missing.size} active elements) "
+                         "has no corotational table (kid < 0); give it one or pass corot=None")
     element_and_contact_forces(*hex_only_args(U, conn, active, dN, geo, wdet, h, elem_mat, params,
                                               s_old, s_new, pristine, dirty, f_elem, energy,
                                               corot))

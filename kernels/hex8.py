@@ -15,7 +15,8 @@ Conventions
   frame of the rotation of its mean deformation gradient, K d for an elastic material
   (:func:`corot_global`), the Gauss-point update of the linear local strains for a damaging one
   (:func:`corot_damaging`); tables by :func:`corot_tables`.
-* Without tables (tests' reference) an element is total-Lagrangian: F = I + sum_a u_a (x) dN_a,
+* :func:`gauss_forces` (the tests' and benchmarks' reference, never a run's) computes an element
+  as total-Lagrangian: F = I + sum_a u_a (x) dN_a,
   Green-Lagrange strain E = (H + H^T + H^T H) / 2 with H = F - I (no cancellation at small
   strain), Voigt order [xx, yy, zz, yz, xz, xy] with engineering shears; the material returns
   the second Piola-Kirchhoff stress S (Pa) in the same order; nodal internal force
@@ -326,14 +327,16 @@ def gauss_point_update(p, he, eps, s_old_e, s_new_e, g, sig):
 @ijit
 def hex_chunk(lo, hi, U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old, s_new, pristine,
               dirty, ke, kbt, kxo, kdn, kid, f_elem, energy):
-    """Elements ``active[lo:hi]`` of :func:`.forces.hex_forces` (one parallel task, its own scratch)."""
+    """Elements ``active[lo:hi]`` of the force kernel (one parallel task, its own scratch), each a
+    corotational hexahedron (table ``kid[e]`` of :func:`corot_tables`; an element without one
+    gets NaN forces, which the run's guards stop on)."""
     ue = np.empty((8, 3))
     F = np.empty((3, 3))
     eps = np.empty(6)
     sig = np.empty(6)
-    # corotational elements: local displacements, rotations and table of each slot of the task,
-    # and the Gauss-point strains of the damaging ones
-    ns = hi - lo if ke.shape[0] > 0 else 0   # no scratch where no element uses the path
+    # local displacements, rotations and table of each slot of the task, and the Gauss-point
+    # strains of the damaging ones
+    ns = hi - lo
     dl = np.empty((ns, 24))
     fl = np.empty((ns, 24))
     rot = np.empty((ns, 3, 3))
@@ -348,55 +351,11 @@ def hex_chunk(lo, hi, U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old
                 ue[a, i] = U[n, i]
                 fe[a, i] = 0.0
         t = kid[e]
-        if t >= 0:   # corotational element: K d (and the damaging ones' strains) below
-            if corot_local(ue, kxo[t], kdn[t], rot[k - lo], dl[k - lo]) > 0.0:
-                slot[k - lo] = t
-            else:   # inverted: NaN for the run's guards
-                fe[:, :] = np.nan
-                energy[e] = np.nan
-            continue
-        p = params[elem_mat[e]]
-        plastic = p[MP_ELASTIC] != 1.0
-        fast = plastic and pristine[e] != 0   # virgin state: no state to read while elastic
-        dne = dN[geo[e]]
-        en = 0.0
-        for g in range(8):
-            dng = dne[g]
-            hex_gauss_strain(ue, dng, F, eps)
-            w = wdet[e, g]
-            acc = 0.0
-            if fast:   # the committed state is the virgin one: its strengths are the material's
-                i1, q, d0, d1, d2, d3, d4, d5 = trial_stress(p, eps[0], eps[1], eps[2], eps[3],
-                                                             eps[4], eps[5])
-                if surely_elastic(p, i1, q, p[MP_SBT0], p[MP_SBC0]):
-                    m0 = i1 / 3.0
-                    sig[0] = m0 + d0
-                    sig[1] = m0 + d1
-                    sig[2] = m0 + d2
-                    sig[3] = d3
-                    sig[4] = d4
-                    sig[5] = d5
-                else:   # the element leaves its virgin state: the full update from here on
-                    fast = False
-                    for gg in range(g):
-                        for m in range(NMS):
-                            s_new[e, gg, m] = s_old[e, gg, m]
-                    dirty[e] = 1
-            if not plastic:
-                elastic_stress(p, eps, sig)
-            if plastic and not fast:
-                acc = gauss_point_update(p, h[e], eps, s_old[e], s_new[e], g, sig)
-            else:   # elastic stress from the total strain (no plastic strain)
-                for m in range(6):
-                    acc += sig[m] * eps[m]
-            hex_add_gauss_force(F, sig, dng, w, fe)
-            en += 0.5 * w * acc
-        if fast and dirty[e] != 0:   # trial state = committed state again
-            for g in range(8):
-                for m in range(NMS):
-                    s_new[e, g, m] = s_old[e, g, m]
-            dirty[e] = 0
-        energy[e] = en
+        if t >= 0 and corot_local(ue, kxo[t], kdn[t], rot[k - lo], dl[k - lo]) > 0.0:
+            slot[k - lo] = t   # K d (and the damaging ones' strains) below
+        else:   # no table, or inverted: NaN for the run's guards
+            fe[:, :] = np.nan
+            energy[e] = np.nan
     j = 0
     while j < ns:   # K d of each run of slots with one table: one matrix product (BLAS)
         t = slot[j]
@@ -427,6 +386,71 @@ def hex_chunk(lo, hi, U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old
                         if fast:
                             dirty[e] = 1
         j = j1
+
+
+@pjit
+def gauss_forces(U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old, s_new, pristine,
+                 dirty, f_elem, energy):
+    """Every element of ``active`` as a total-Lagrangian hexahedron at its Gauss points: the
+    reference that the corotational element of a run is tested and benchmarked against (arguments
+    those of :func:`.forces.hex_forces` without tables; runs never call it, so it is compiled
+    apart from their force kernel: 7 s of their cold start, BENCHMARKS.md section 62)."""
+    na = active.shape[0]
+    for t in prange((na + CHUNK - 1) // CHUNK):   # tasks of CHUNK elements, scratch per task
+        ue = np.empty((8, 3))
+        F = np.empty((3, 3))
+        eps = np.empty(6)
+        sig = np.empty(6)
+        for k in range(t * CHUNK, min(na, (t + 1) * CHUNK)):
+            e = active[k]
+            fe = f_elem[e]
+            for a in range(8):
+                n = conn[e, a]
+                for i in range(3):
+                    ue[a, i] = U[n, i]
+                    fe[a, i] = 0.0
+            p = params[elem_mat[e]]
+            plastic = p[MP_ELASTIC] != 1.0
+            fast = plastic and pristine[e] != 0   # virgin state: no state to read while elastic
+            dne = dN[geo[e]]
+            en = 0.0
+            for g in range(8):
+                dng = dne[g]
+                hex_gauss_strain(ue, dng, F, eps)
+                w = wdet[e, g]
+                acc = 0.0
+                if fast:   # the committed state is the virgin one: the material's strengths
+                    i1, q, d0, d1, d2, d3, d4, d5 = trial_stress(p, eps[0], eps[1], eps[2], eps[3],
+                                                                 eps[4], eps[5])
+                    if surely_elastic(p, i1, q, p[MP_SBT0], p[MP_SBC0]):
+                        m0 = i1 / 3.0
+                        sig[0] = m0 + d0
+                        sig[1] = m0 + d1
+                        sig[2] = m0 + d2
+                        sig[3] = d3
+                        sig[4] = d4
+                        sig[5] = d5
+                    else:   # the element leaves its virgin state: the full update from here on
+                        fast = False
+                        for gg in range(g):
+                            for m in range(NMS):
+                                s_new[e, gg, m] = s_old[e, gg, m]
+                        dirty[e] = 1
+                if not plastic:
+                    elastic_stress(p, eps, sig)
+                if plastic and not fast:
+                    acc = gauss_point_update(p, h[e], eps, s_old[e], s_new[e], g, sig)
+                else:   # elastic stress from the total strain (no plastic strain)
+                    for m in range(6):
+                        acc += sig[m] * eps[m]
+                hex_add_gauss_force(F, sig, dng, w, fe)
+                en += 0.5 * w * acc
+            if fast and dirty[e] != 0:   # trial state = committed state again
+                for g in range(8):
+                    for m in range(NMS):
+                        s_new[e, g, m] = s_old[e, g, m]
+                dirty[e] = 0
+            energy[e] = en
 
 
 @ijit
@@ -579,7 +603,7 @@ def corot_tables(X, conn, dN, geo, wdet, elem_mat, params, elems):
 
     Returns ``ke`` (nk, 24, 24) N/m, ``kbt`` (nk, 24, 48) 1/m, ``kxo`` (nk, 8, 3) m, ``kdn``
     (nk, 8, 3) 1/m and ``kid`` (ne,) int64: the table of each element, -1 outside ``elems``
-    (those keep the total-Lagrangian Gauss-point path). ``kbt`` maps local displacements to the
+    (those the force kernel must not be given: :func:`.forces.hex_forces` refuses them). ``kbt`` maps local displacements to the
     Gauss-point strains, ``strains[6 g + m] = sum_r d[r] kbt[r, 6 g + m]`` (Voigt, engineering
     shears); all zero for a table of an elastic material (never read).
     """

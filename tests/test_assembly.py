@@ -87,13 +87,14 @@ def test_fused_forces_equal_the_two_kernels(n_blocks):
 
 
 def test_single_set_calls_run_the_compiled_kernel_of_a_run():
-    """``hex_forces`` and ``contact_forces`` pass the force kernel tuples of the same Numba types
-    as a run's, with the other set empty: they call its compiled code, compile nothing new."""
+    """``hex_forces`` (with tables) and ``contact_forces`` pass the force kernel tuples of the
+    same Numba types as a run's, with the other set empty: they call its compiled code, compile
+    nothing new."""
     from numba import typeof
     from dr_masonry.kernels.forces import (NO_CONTACTS, NO_ELEMENTS, contact_only_args,
                                             hex_only_args)
     sim = _wall(2)
     m, c = sim.mesh, sim.cont
     assert typeof(NO_CONTACTS) == typeof(c) and typeof(NO_ELEMENTS) == typeof(m)
-    assert typeof(hex_only_args(sim.dyn.U, *m[:12], m.fbuf, m.energy)[2]) == typeof(m)
+    assert typeof(hex_only_args(sim.dyn.U, *m[:12], m.fbuf, m.energy, m[12:17])[2]) == typeof(m)
     assert typeof(contact_only_args(sim.dyn.X, sim.dyn.U, *c[:13])[3]) == typeof(c)

@@ -122,7 +122,7 @@ def test_inverted_element_gives_nan_for_the_guards():
 
 def test_tables_one_per_shape_and_material():
     """Translated copies share a table; another material or shape gets its own; elements not
-    listed keep the Gauss-point path (-1)."""
+    listed get none (-1), and ``hex_forces`` refuses to run them with the tables."""
     xe, c1 = box_mesh((1, 1, 1), (0.2, 0.2, 0.2))
     xe = xe[c1[0]]
     X = np.concatenate([xe, xe + [0.3, 0.0, 0.0], xe * [1.0, 1.0, 1.5] + [0.6, 0.0, 0.0]])
@@ -141,6 +141,13 @@ def test_tables_one_per_shape_and_material():
                                rtol=0, atol=1e-9 * np.abs(ke[kid[0]]).max())
     np.testing.assert_allclose(kdn[kid[0]].sum(axis=0), 0.0, atol=1e-12)
     np.testing.assert_allclose(kxo[kid[0]], X[conn[0]] - X[conn[0, 0]])
+    h = np.zeros(4)
+    s = np.zeros((4, 8, NMS))
+    with pytest.raises(ValueError, match="element 2 .* no corotational table"):
+        forces.hex_forces(np.zeros_like(X), conn4, np.arange(4), dN, np.r_[geo, geo[0]],
+                          np.concatenate([wdet, wdet[:1]]), h, emat, params, s, s.copy(),
+                          np.ones(4, np.uint8), np.zeros(4, np.uint8), np.zeros((4, 8, 3)),
+                          np.zeros(4), corot=(ke, np.zeros((ke.shape[0], 24, 48)), kxo, kdn, kid))
 
 
 # ---------------------------------------------------------------------------- damaging materials
