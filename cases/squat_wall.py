@@ -26,12 +26,13 @@ its fracture energy; all of these), ``shear_damage=paper`` the literal eq. (7) o
 Run: ``python cases/squat_wall.py [key=value ...]`` (or ``dr-masonry run squat_wall``). The
 default, coarse monotonic run (one hexahedron per brick, 5260 nodes, 5036 contacts; 60 graded
 increments to 1 % drift: 30 put the peak 5.7 % low, BENCHMARKS.md section 11) took 1 min 31 s
-alone on 2 cores (2026-12-05; 64 increments, no cut, 116,770 iterations, 86 s of relaxation;
-section 61);
+alone on 2 cores (2026-12-05; 64 increments, no cut, 118,270 iterations, 86 s of relaxation;
+section 63);
 ``mesh=fine`` (CASES.md's 4 x 1 x 2 hexahedra per brick, 20000 nodes) costs about 3.5 times
 more per iteration and took 22 min 43 s alone on 2 cores (section 51, the code before section
 61); with ``floor_tol=1e-3 stall_iter=3000`` 12 min 11 s for the same peak and end force
-(section 59), 12 min 25 s on a 1.14 x slower machine with the code of section 61.
+(section 59), 12 min 25 s on a 1.14 x slower machine with the code of section 61, 11 min 00 s
+with the return mapping's first guess (section 63).
 The energy balance error of these coarse increments reaches a few per cent (trapezoidal rule of
 the external work over large steps; it shrinks with the step, see tests/test_walls.py).
 ``fast=true`` runs a 0.88 x 0.81 m coarse wall in a few increments (test suite). The full

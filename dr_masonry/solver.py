@@ -25,7 +25,7 @@ from .kernels.forces import Cont, Mesh
 from .kernels.hex8 import (corot_tables, hex_geometry_shared, inverted_element, lumped_mass,
                            pristine_elements, stiffness_rowsum)
 from .kernels.joint_law import JS_D, JS_DISS, JS_DISSF
-from .kernels.plastic_damage import FLAG_RETURN, MP_HMAX, MS_DC, MS_DISS, MS_DT, MS_FLAG
+from .kernels.plastic_damage import FLAG_RETURN, MP_HMAX, MS_DC, MS_DISS, MS_DT, MS_FLAG, NMS
 from .materials import JointLaw, PlasticDamage
 from .model import Model, ModelError, id_array, quad_area_vector
 from .options import COARSE_MIN_BLOCKS, DAMPING, OptionsError, SolverOptions
@@ -1323,6 +1323,10 @@ class Simulation:
             self.writer.rewind(int(self._resume_increment))
         inc, arrays, meta = open_result(self.output).checkpoint()
         d = self.dyn
+        sb = arrays.get("s_blocks")
+        if sb is not None and sb.ndim == 3 and sb.shape[2] == NMS - 1:
+            # written before the states held MS_DL (2026-12-05): no multiplier, no first guess
+            arrays["s_blocks"] = np.concatenate([sb, np.zeros(sb.shape[:2] + (1,))], axis=2)
         self._check_checkpoint(arrays)
         for k in self._STATE:
             getattr(d, k)[:] = arrays[k]

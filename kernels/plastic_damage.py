@@ -11,7 +11,9 @@ return is coaxial with the trial stress: ``sb = I1/3 1 + rho s_tr`` with
 ``I1 = I1_tr - 3 K tan(psi) dl`` and ``q (1 + 3 mu dl / sqrt(e^2 + q^2)) = q_tr``. Only the
 eigenvalues of the trial deviator are needed (no eigenvectors); the consistency condition is
 one scalar equation F(dl) = 0, bracketed (F(0) > 0, F -> -inf) and solved by the Illinois
-regula falsi. A return that does not reach the tolerance keeps the bracketed value and sets
+regula falsi. The bracket starts around the multiplier of the point's previous return (kept in
+the state: between two relaxation iterations the strain hardly moves, so the root is within a
+fraction of a per cent of it), else from the perfectly plastic estimate. A return that does not reach the tolerance keeps the bracketed value and sets
 bit 1 of the state flag; an element length outside (0, h_max] is clamped and sets bit 2.
 
 Parameters ``p`` (NMP,) come from ``PlasticDamage.params_array()``: a header (``MP_*``) and two
@@ -55,7 +57,8 @@ MS_KC = 10       #: compressive equivalent plastic strain
 MS_SBT = 11      #: effective tensile strength at MS_KT, Pa
 MS_SBC = 12      #: effective compressive strength at MS_KC, Pa
 MS_FLAG = 13     #: bit flags: 1 = return not converged to tolerance, 2 = element length clamped
-NMS = 14
+MS_DL = 14       #: plastic multiplier of the point's last return (the next return's first guess)
+NMS = 15
 
 FLAG_RETURN = 1
 FLAG_LENGTH = 2
@@ -168,6 +171,81 @@ def _returned(p, s, dl, i1tr, qtr, e1, e2, e3, kt0, kc0):
     return f, i1, rho, w, kt, kc, sbt, sbc, dt, dc, r
 
 
+@jit
+def _return(p, s, f0, guess, i1tr, qtr, e1, e2, e3, kt0, kc0):
+    """Plastic multiplier of the return from a trial state with F(0) = ``f0`` > tolerance (the
+    arguments after ``guess`` as for :func:`_returned`): a bracket [lo, hi], F(lo) > 0 >= F(hi),
+    found around ``guess`` (the point's previous multiplier; none if not > 0) by steps of 0.1 %
+    of it growing 4 x, or else grown 4 x at a time from the perfectly plastic estimate
+    f0 (1 - alpha) / (3 mu), narrowed by the Illinois regula falsi to |F| <= tolerance or a width
+    of 1e-15 dl. Returns (dl, converged, the state at dl as :func:`_returned` gives it)."""
+    ftol = p[MP_FTOL]
+    lo = 0.0
+    flo = f0
+    warm = 0.0 < guess < np.inf
+    hi = guess if warm else f0 * (1.0 - p[MP_ALPHA]) / (3.0 * p[MP_MU])
+    step = 1e-3 * hi
+    res = _returned(p, s, hi, i1tr, qtr, e1, e2, e3, kt0, kc0)
+    fhi = res[0]
+    if warm and abs(fhi) <= ftol:
+        return hi, True, res
+    it = 0
+    if warm and fhi <= 0.0:   # the root is below the guess (and above 0, where F = f0 > 0)
+        while it < 200:
+            x = hi - step
+            if x <= 0.0:
+                break
+            rx = _returned(p, s, x, i1tr, qtr, e1, e2, e3, kt0, kc0)
+            if not rx[0] <= 0.0:
+                lo = x
+                flo = rx[0]
+                break
+            hi = x
+            fhi = rx[0]
+            res = rx
+            step *= 4.0
+            it += 1
+    else:   # the root is above hi: grow it (from the guess by steps, else 4 x)
+        while not fhi <= 0.0 and it < 200:
+            lo = hi
+            flo = fhi
+            if warm:
+                hi += step
+                step *= 4.0
+            else:
+                hi *= 4.0
+            res = _returned(p, s, hi, i1tr, qtr, e1, e2, e3, kt0, kc0)
+            fhi = res[0]
+            it += 1
+    if not fhi <= 0.0:
+        return hi, False, res
+    side = 0
+    for _ in range(200):
+        x = hi - fhi * (hi - lo) / (fhi - flo)
+        if not (lo < x < hi):
+            x = 0.5 * (lo + hi)
+        rx = _returned(p, s, x, i1tr, qtr, e1, e2, e3, kt0, kc0)
+        fx = rx[0]
+        if abs(fx) <= ftol:
+            return x, True, rx
+        if fx > 0.0:
+            lo = x
+            flo = fx
+            if side == 1:
+                fhi *= 0.5
+            side = 1
+        else:
+            hi = x
+            fhi = fx
+            res = rx
+            if side == -1:
+                flo *= 0.5
+            side = -1
+        if hi - lo <= 1e-15 * hi:
+            return hi, True, res
+    return hi, False, res
+
+
 @ijit
 def elastic_stress(p, eps, sig):
     """Linear elastic stress ``sig`` (6,) Pa = lam tr(eps) 1 + 2 mu eps of strain ``eps`` (6,)
@@ -222,13 +300,16 @@ def gp_update(p, h, eps, s_old, s_new, sig):
     s_old : (NMS,) float64
         committed state at the start of the increment (read only).
     s_new : (NMS,) float64
-        updated state (written; not written for an elastic material).
+        updated state (written; not written for an elastic material). Its ``MS_DL`` on entry,
+        the multiplier of the point's previous return (a trial's or the committed one), is the
+        first guess of this return: any value is safe, a good one saves most of the search.
     sig : (6,) float64
         stress written, Pa, same Voigt order.
     """
     if p[MP_ELASTIC] == 1.0:
         elastic_stress(p, eps, sig)
         return
+    guess = s_new[MS_DL]   # the multiplier of this point's previous trial (or committed) return
     for i in range(NMS):
         s_new[i] = s_old[i]
     flag = int(s_old[MS_FLAG])
@@ -240,7 +321,6 @@ def gp_update(p, h, eps, s_old, s_new, sig):
         flag |= FLAG_LENGTH
         h = p[MP_HMAX]
     s = href / h
-    mu = p[MP_MU]
     i1tr, qtr, d0, d1, d2, d3, d4, d5 = trial_stress(
         p, eps[0] - s_old[MS_EPSP], eps[1] - s_old[MS_EPSP + 1], eps[2] - s_old[MS_EPSP + 2],
         eps[3] - s_old[MS_EPSP + 3], eps[4] - s_old[MS_EPSP + 4], eps[5] - s_old[MS_EPSP + 5])
@@ -269,52 +349,15 @@ def gp_update(p, h, eps, s_old, s_new, sig):
     kt0 = s_old[MS_KT]
     kc0 = s_old[MS_KC]
     f0 = yield_value(p, i1tr, qtr, m + e1, sbt0, sbc0)
-    dl = 0.0
     if f0 > ftol:
-        # bracket: F(0) > 0, F -> -inf as dl -> inf
-        lo = 0.0
-        flo = f0
-        hi = f0 * (1.0 - p[MP_ALPHA]) / (3.0 * mu)
-        fhi = _returned(p, s, hi, i1tr, qtr, e1, e2, e3, kt0, kc0)[0]
-        it = 0
-        while not fhi <= 0.0 and it < 200:
-            lo = hi
-            flo = fhi
-            hi *= 4.0
-            fhi = _returned(p, s, hi, i1tr, qtr, e1, e2, e3, kt0, kc0)[0]
-            it += 1
-        converged = False
-        if fhi <= 0.0:
-            side = 0
-            for _ in range(200):
-                x = hi - fhi * (hi - lo) / (fhi - flo)
-                if not (lo < x < hi):
-                    x = 0.5 * (lo + hi)
-                fx = _returned(p, s, x, i1tr, qtr, e1, e2, e3, kt0, kc0)[0]
-                if abs(fx) <= ftol:
-                    hi = x
-                    converged = True
-                    break
-                if fx > 0.0:
-                    lo = x
-                    flo = fx
-                    if side == 1:
-                        fhi *= 0.5
-                    side = 1
-                else:
-                    hi = x
-                    fhi = fx
-                    if side == -1:
-                        flo *= 0.5
-                    side = -1
-                if hi - lo <= 1e-15 * hi:
-                    converged = True
-                    break
+        dl, converged, res = _return(p, s, f0, guess, i1tr, qtr, e1, e2, e3, kt0, kc0)
         if not converged:
             flag |= FLAG_RETURN
-        dl = hi
-    f, i1, rho, w, kt, kc, sbt, sbc, dt, dc, r = _returned(
-        p, s, dl, i1tr, qtr, e1, e2, e3, kt0, kc0)
+        s_new[MS_DL] = dl
+    else:
+        dl = 0.0
+        res = _returned(p, s, dl, i1tr, qtr, e1, e2, e3, kt0, kc0)
+    f, i1, rho, w, kt, kc, sbt, sbc, dt, dc, r = res
     m = i1 / 3.0
     a = dl * rho * w
     b = dl * p[MP_TANPSI] / 3.0

@@ -250,6 +250,36 @@ def test_random_large_increments(x, h):
         s_old = s_new.copy()
 
 
+@settings(deadline=None, max_examples=100)
+@given(st.integers(0, 2**32 - 1), st.sampled_from(["exact", "near", 0.0, -1.0, 1e-12, 1e3,
+                                                   np.inf, np.nan]))
+def test_first_guess_changes_nothing_but_the_search(seed, guess):
+    """The return starts from ``s_new[MS_DL]`` (the point's previous multiplier): whatever it
+    holds (the exact multiplier, one 0.1 % off, none, nonsense), the update is the one found
+    without a guess to the return's tolerance, stores its multiplier, and converges."""
+    rng = np.random.default_rng(seed)
+    p = REF.params_array()
+    h = rng.uniform(0.02, 0.15)
+    s_old = REF.initial_state() if seed % 3 == 0 else _random_state(rng, REF, h)
+    eps = s_old[k.MS_EPSP:k.MS_EPSP + 6] + rng.normal(scale=10 ** rng.uniform(-4, -2.5), size=6)
+    cold, sig_c = np.zeros(k.NMS), np.zeros(6)   # MS_DL = 0: no guess
+    k.gp_update(p, h, eps, s_old, cold, sig_c)
+    warm, sig_w = np.zeros(k.NMS), np.zeros(6)
+    g = {"exact": cold[k.MS_DL], "near": cold[k.MS_DL] * 1.001}.get(guess, guess)
+    warm[k.MS_DL] = g
+    k.gp_update(p, h, eps, s_old, warm, sig_w)
+    scale = max(np.abs(sig_c).max(), 1e5)
+    np.testing.assert_allclose(sig_w, sig_c, rtol=0, atol=1e-7 * scale)
+    np.testing.assert_allclose(warm, cold, rtol=1e-6, atol=1e-12)
+    assert int(warm[k.MS_FLAG]) & k.FLAG_RETURN == 0
+    plastic = not np.allclose(cold[k.MS_EPSP:k.MS_EPSP + 6], s_old[k.MS_EPSP:k.MS_EPSP + 6],
+                              rtol=0, atol=1e-15)
+    if plastic:
+        assert cold[k.MS_DL] > 0
+    else:   # no return: the committed multiplier stays (the next return's guess)
+        assert cold[k.MS_DL] == s_old[k.MS_DL]
+
+
 def test_elastic_fast_path_is_hooke():
     m = PlasticDamage.elastic(30e9, 0.2, 2400.0)
     p = m.params_array()
