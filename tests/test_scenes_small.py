@@ -400,3 +400,32 @@ def test_a_return_mapping_short_of_its_tolerance_is_reported():
                                             r"of element 1 \(block 0\)") as got:
         sim.run(stages)
     assert sum("return mapping" in str(w.message) for w in got) == 1   # once per run
+
+
+def test_resume_checkpoint_without_return_multipliers(tmp_path):
+    """A checkpoint whose Gauss-point states predate ``MS_DL`` (NMS - 1 fields) resumes with the
+    multipliers zero (only the returns' first guess) and the run ends as an uninterrupted one."""
+    import h5py
+    from dr_masonry.kernels.plastic_damage import MS_DL, NMS
+    params = dict(couplet.PARAMS, increments=40)
+    sim, stages = couplet.build(dict(params, h5=None))
+    whole = sim.run(stages)
+    path = str(tmp_path / "old.h5")
+    sim1, (stage,) = couplet.build(dict(params, h5=path))
+    pull = stage.controls[-1]
+    sim1.run([type(stage)("first", 15, stage.controls[:-1] + [type(pull)(
+        target=pull.target, dof="z", path=pull.path[:15], name="pull")])])
+    sim1.close()
+    with h5py.File(path, "r+") as f:     # as an older version wrote it
+        sb = f["checkpoint/s_blocks"][...]
+        assert sb.shape[2] == NMS   # (the couplet's bricks stay elastic: the guesses' effect is
+        # tests/test_plastic_damage.py's)
+        del f["checkpoint/s_blocks"]
+        f["checkpoint"].create_dataset("s_blocks", data=sb[:, :, :MS_DL])
+    sim2, (stage,) = couplet.build(dict(params, h5=None))
+    sim2.resume(path)
+    assert sim2.mesh.s_old.shape[2] == NMS and not sim2.mesh.s_old[:, :, MS_DL].any()
+    hist = sim2.run([type(stage)("rest", 25, [type(pull)(target=sim2.rigid_points[0], dof="z",
+                                                         path=pull.path[15:], name="pull")])])
+    sim2.close()
+    assert np.allclose(hist["platen.fz"], whole["platen.fz"], rtol=1e-6, atol=1e-6)
