@@ -8,7 +8,9 @@ along, thickness, height) built by ``dr_masonry.geometry.add_wall``:
   elastic range (virgin elements skipping the state, and through the full state update) and with
   strains that make every Gauss point plastic and damaged (the fraction of damaged Gauss points
   is printed); each as the corotational element of a run and, for comparison, as the
-  total-Lagrangian element at its Gauss points (``hex_forces`` without tables);
+  total-Lagrangian element at its Gauss points (``hex_forces`` without tables). The plastic
+  case repeats one strain, so each return starts from its own root (the lower bound); "strain
+  moving" alternates two strains ``MOVE`` apart, as two relaxation iterations do;
 * ``contact_forces`` (the force kernel with no elements): ns per contact-point-step, joints elastic and joints damaged (opened);
 * ``relax``: a full dynamic-relaxation iteration (viscous damping, gravity load, ``tol=0`` so it
   runs ``relax_iters`` iterations), ns per element-iteration;
@@ -49,6 +51,7 @@ PARAMS = dict(
 )
 ELASTIC_STRAIN = 2e-5           # uniaxial strain well inside the elastic range (0.1 MPa)
 PLASTIC_STRAIN = 1e-3           # uniaxial tension, trial stress 4.8 MPa >> ft = 1.5 MPa
+MOVE = 1e-5                     # relative change of the displacements between two plastic calls
 JUMP_ELASTIC = 2e-7             # m, block translations: joint gaps below u0 = ft / knn = 1.6 um
 JUMP_DAMAGED = 2e-4             # m, joint gaps far beyond u0
 
@@ -117,6 +120,20 @@ def hex_call(args, tables=None):
     return element_and_contact_forces, hex_only_args(*args, corot=tables)
 
 
+def alternating(fn, call_a, call_b):
+    """(a function, its arguments ()) calling ``fn(*call_a)`` and ``fn(*call_b)`` in turn: with
+    the same state arrays and displacements ``MOVE`` apart, each call's returns start from the
+    other's multipliers, as between two relaxation iterations (the plastic cases' calls with one
+    strain start from their own root: the lower bound)."""
+    calls = (call_a, call_b)
+    turn = [0]
+
+    def step():
+        turn[0] ^= 1
+        fn(*calls[turn[0]])
+    return step, ()
+
+
 def contact_call(args):
     """(force kernel, its arguments) for ``contact_forces(*args)``, as :func:`hex_call`."""
     from dr_masonry.kernels.forces import contact_only_args, element_and_contact_forces
@@ -173,6 +190,11 @@ def steady(params):
             s_new = args[10]
             frac = float(np.mean((s_new[:, :, MS_DT] > 0) | (s_new[:, :, MS_DC] > 0))) if not elastic else 0.0
             cases.append((label, fn, call, ne, "element-step", frac))
+            if label == "hex reference, plastic+damaged (corotational)":
+                fn2, call2 = alternating(fn, call, hex_call((args[0] * (1.0 + MOVE),) + args[1:],
+                                                            corot(sim, args))[1])
+                cases.append(("hex reference, plastic+damaged, strain moving (corotational)", fn2,
+                              call2, ne, "element-step", frac))
         for label, jump in (("contact, joints elastic", JUMP_ELASTIC),
                             ("contact, joints damaged", JUMP_DAMAGED)):
             from dr_masonry.kernels.joint_law import JS_D

@@ -110,7 +110,8 @@ def hex_forces(U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old, s_new
         ``PlasticDamage.params_array()`` rows; a row with ``p[MP_ELASTIC] == 1`` takes the
         elastic fast path (``elastic_stress``, no state read or written).
     s_old, s_new : (ne, 8, NMS) float64
-        committed (read) and trial (written by ``gp_update``; not for elastic materials)
+        committed (read) and trial (written by ``gp_update``; not for elastic materials; its
+        ``MS_DL``, the previous return's multiplier, read first as the next one's guess)
         Gauss-point states.
     pristine : (ne,) uint8
         1 where the committed state of every Gauss point is the material's virgin state
@@ -146,8 +147,9 @@ def hex_forces(U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old, s_new
         return
     missing = active[corot[4][active] < 0]
     if missing.size:
-        raise ValueError(f"hex_forces: element {missing[0]} (of {missing.size} active elements) "
-                         "has no corotational table (kid < 0); give it one or pass corot=None")
+        raise ValueError(f"hex_forces: active element {missing[0]} has no corotational table "
+                         f"(kid < 0; {missing.size} such elements): give every active element "
+                         "one, or pass corot=None")
     element_and_contact_forces(*hex_only_args(U, conn, active, dN, geo, wdet, h, elem_mat, params,
                                               s_old, s_new, pristine, dirty, f_elem, energy,
                                               corot))

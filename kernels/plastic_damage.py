@@ -13,8 +13,9 @@ eigenvalues of the trial deviator are needed (no eigenvectors); the consistency 
 one scalar equation F(dl) = 0, bracketed (F(0) > 0, F -> -inf) and solved by the Illinois
 regula falsi. The bracket starts around the multiplier of the point's previous return (kept in
 the state: between two relaxation iterations the strain hardly moves, so the root is within a
-fraction of a per cent of it), else from the perfectly plastic estimate. A return that does not reach the tolerance keeps the bracketed value and sets
-bit 1 of the state flag; an element length outside (0, h_max] is clamped and sets bit 2.
+fraction of a per cent of it), else from the perfectly plastic estimate. A return that does not
+reach the tolerance keeps the bracketed value and sets bit 1 of the state flag; an element length
+outside (0, h_max] is clamped and sets bit 2.
 
 Parameters ``p`` (NMP,) come from ``PlasticDamage.params_array()``: a header (``MP_*``) and two
 hardening tables of NTAB points (tension at ``MP_TAB``, compression at ``MP_TAB + 4 NTAB``),
