@@ -325,6 +325,17 @@ def gauss_point_update(p, he, eps, s_old_e, s_new_e, g, sig):
 
 
 @ijit
+def gather_element(U, conn, e, ue, fe):
+    """Displacements ``ue`` (8, 3) m of element ``e``'s nodes from ``U``; its forces ``fe`` (8, 3)
+    zeroed."""
+    for a in range(8):
+        n = conn[e, a]
+        for i in range(3):
+            ue[a, i] = U[n, i]
+            fe[a, i] = 0.0
+
+
+@ijit
 def hex_chunk(lo, hi, U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old, s_new, pristine,
               dirty, ke, kbt, kxo, kdn, kid, f_elem, energy):
     """Elements ``active[lo:hi]`` of the force kernel (one parallel task, its own scratch), each a
@@ -344,17 +355,12 @@ def hex_chunk(lo, hi, U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old
     strains = np.empty((ns, 48))
     for k in range(lo, hi):
         e = active[k]
-        fe = f_elem[e]
-        for a in range(8):
-            n = conn[e, a]
-            for i in range(3):
-                ue[a, i] = U[n, i]
-                fe[a, i] = 0.0
+        gather_element(U, conn, e, ue, f_elem[e])
         t = kid[e]
         if t >= 0 and corot_local(ue, kxo[t], kdn[t], rot[k - lo], dl[k - lo]) > 0.0:
             slot[k - lo] = t   # K d (and the damaging ones' strains) below
         else:   # no table, or inverted: NaN for the run's guards
-            fe[:, :] = np.nan
+            f_elem[e, :, :] = np.nan
             energy[e] = np.nan
     j = 0
     while j < ns:   # K d of each run of slots with one table: one matrix product (BLAS)
@@ -404,11 +410,7 @@ def gauss_forces(U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old, s_n
         for k in range(t * CHUNK, min(na, (t + 1) * CHUNK)):
             e = active[k]
             fe = f_elem[e]
-            for a in range(8):
-                n = conn[e, a]
-                for i in range(3):
-                    ue[a, i] = U[n, i]
-                    fe[a, i] = 0.0
+            gather_element(U, conn, e, ue, fe)
             p = params[elem_mat[e]]
             plastic = p[MP_ELASTIC] != 1.0
             fast = plastic and pristine[e] != 0   # virgin state: no state to read while elastic

@@ -317,8 +317,14 @@ def test_runaway_reference_point_and_inverted_element_are_named():
         sim.run([Stage("hold", 1, [Force(target=rp, dof="x", to=1.0)])])
 
 
-def test_restart_continues_a_run(tmp_path):
-    """A run stopped after stage 1 and resumed from its file ends where an uninterrupted run ends."""
+@pytest.mark.parametrize("old_states", [False, True])
+def test_restart_continues_a_run(tmp_path, old_states):
+    """A run stopped after stage 1 and resumed from its file ends where an uninterrupted run ends;
+    also from a checkpoint whose Gauss-point states predate ``MS_DL`` (``old_states``: NMS - 1
+    fields), resumed with the multipliers zero (only the returns' first guess; the couplet's
+    bricks stay elastic, the guesses' effect is tests/test_plastic_damage.py's)."""
+    import h5py
+    from dr_masonry.kernels.plastic_damage import MS_DL, NMS
     params = dict(couplet.PARAMS, increments=40)
     sim, stages = couplet.build(dict(params, h5=None))
     whole = sim.run(stages)
@@ -330,8 +336,15 @@ def test_restart_continues_a_run(tmp_path):
         target=pull.target, dof="z", path=pull.path[:15], name="pull")])
     sim1.run([first])
     sim1.close()
+    if old_states:   # as an older version wrote it
+        with h5py.File(path, "r+") as f:
+            sb = f["checkpoint/s_blocks"][...]
+            del f["checkpoint/s_blocks"]
+            f["checkpoint"].create_dataset("s_blocks", data=sb[:, :, :MS_DL])
     sim2, (stage,) = couplet.build(dict(params, h5=None))
     sim2.resume(path)
+    assert sim2.mesh.s_old.shape[2] == NMS
+    assert not old_states or not sim2.mesh.s_old[:, :, MS_DL].any()
     rest = type(stage)("rest", 25, [type(pull)(target=sim2.rigid_points[0], dof="z",
                                                path=pull.path[15:], name="pull")])
     hist = sim2.run([rest])
@@ -401,31 +414,3 @@ def test_a_return_mapping_short_of_its_tolerance_is_reported():
         sim.run(stages)
     assert sum("return mapping" in str(w.message) for w in got) == 1   # once per run
 
-
-def test_resume_checkpoint_without_return_multipliers(tmp_path):
-    """A checkpoint whose Gauss-point states predate ``MS_DL`` (NMS - 1 fields) resumes with the
-    multipliers zero (only the returns' first guess) and the run ends as an uninterrupted one."""
-    import h5py
-    from dr_masonry.kernels.plastic_damage import MS_DL, NMS
-    params = dict(couplet.PARAMS, increments=40)
-    sim, stages = couplet.build(dict(params, h5=None))
-    whole = sim.run(stages)
-    path = str(tmp_path / "old.h5")
-    sim1, (stage,) = couplet.build(dict(params, h5=path))
-    pull = stage.controls[-1]
-    sim1.run([type(stage)("first", 15, stage.controls[:-1] + [type(pull)(
-        target=pull.target, dof="z", path=pull.path[:15], name="pull")])])
-    sim1.close()
-    with h5py.File(path, "r+") as f:     # as an older version wrote it
-        sb = f["checkpoint/s_blocks"][...]
-        assert sb.shape[2] == NMS   # (the couplet's bricks stay elastic: the guesses' effect is
-        # tests/test_plastic_damage.py's)
-        del f["checkpoint/s_blocks"]
-        f["checkpoint"].create_dataset("s_blocks", data=sb[:, :, :MS_DL])
-    sim2, (stage,) = couplet.build(dict(params, h5=None))
-    sim2.resume(path)
-    assert sim2.mesh.s_old.shape[2] == NMS and not sim2.mesh.s_old[:, :, MS_DL].any()
-    hist = sim2.run([type(stage)("rest", 25, [type(pull)(target=sim2.rigid_points[0], dof="z",
-                                                         path=pull.path[15:], name="pull")])])
-    sim2.close()
-    assert np.allclose(hist["platen.fz"], whole["platen.fz"], rtol=1e-6, atol=1e-6)
