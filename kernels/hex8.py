@@ -469,8 +469,8 @@ def corot_surely_elastic(p, strains):
 
 
 # a call, not inlined: inlined it added 2.5 s to the cold compile to save the call's 80 ns of a
-# damaged element's 1,000 in its elastic range (19,000 in plastic flow), within the noise of whole
-# runs (BENCHMARKS.md section 61)
+# damaged element's 1,000 in its elastic range (6,600 in plastic flow, section 63), within the
+# noise of whole runs (BENCHMARKS.md section 61)
 @jit
 def corot_damaging(p, he, s_old_e, s_new_e, dne, we, strains, R, fe, eye, eps, sig, floc):
     """Forces ``fe`` (8, 3) N of one corotational element of a damaging material.
@@ -605,9 +605,10 @@ def corot_tables(X, conn, dN, geo, wdet, elem_mat, params, elems):
 
     Returns ``ke`` (nk, 24, 24) N/m, ``kbt`` (nk, 24, 48) 1/m, ``kxo`` (nk, 8, 3) m, ``kdn``
     (nk, 8, 3) 1/m and ``kid`` (ne,) int64: the table of each element, -1 outside ``elems``
-    (those the force kernel must not be given: :func:`.forces.hex_forces` refuses them). ``kbt`` maps local displacements to the
-    Gauss-point strains, ``strains[6 g + m] = sum_r d[r] kbt[r, 6 g + m]`` (Voigt, engineering
-    shears); all zero for a table of an elastic material (never read).
+    (those the force kernel must not be given: :func:`.forces.hex_forces` refuses them).
+    ``kbt`` maps local displacements to the Gauss-point strains, ``strains[6 g + m] =
+    sum_r d[r] kbt[r, 6 g + m]`` (Voigt, engineering shears); all zero for a table of an
+    elastic material (never read).
     """
     ne = conn.shape[0]
     elems = np.asarray(elems, dtype=np.int64)
