@@ -12,19 +12,42 @@ largest, and reports:
 * whether the motion is a steady creep (cosine between the displacement changes of the two
   halves of the trace: near 1 for a slow mode relaxing),
 * whether the worst nodes ring (sign changes of their residual over the trace, and the period
-  in iterations).
+  in iterations),
+* whether the slow motion is one the coarse correction can represent: the share of the
+  displacement change over the ``window`` iterations before the probe that each block's affine
+  motion (mass-weighted least squares, :func:`affine_share`) carries, and the share of the rest
+  in blocks with brick damage above 0.1 (a crack inside a brick is not affine).
 
 The relaxation runs in calls of ``check_every`` = 1 iteration from the start (the iterates are
 those of the stored run; an attempt may stop up to 9 iterations earlier than it would have with
 checks every 10). Run: ``python benchmarks/slow_increment.py file=results/terraced_house.h5
-scene=terraced_house [rows=1 probe=20000 trace=60]``; writes ``benchmarks/out/
-slow_increment.csv`` (residual ratio per call). BENCHMARKS.md section 25.
+scene=terraced_house [rows=1 probe=20000 trace=60 window=2000]``; writes ``benchmarks/out/
+slow_increment.csv`` (residual ratio per call). BENCHMARKS.md sections 25 and 64.
 """
 import numpy as np
 
 import common
 
-DEFAULTS = dict(file="", scene="", rows=1, probe=20000, trace=60, top=5)
+DEFAULTS = dict(file="", scene="", rows=1, probe=20000, trace=60, top=5, window=2000)
+
+
+def affine_share(du, mass, X, start):
+    """Mass-weighted share of the node motion ``du`` (n, 3) (m) that the blocks' affine motions
+    carry, and the squared mass norm of the rest per block (nb,): per block (nodes
+    ``start[b]:start[b + 1]``, coordinates ``X`` (n, 3), masses ``mass`` (n,)) the affine field
+    a + B (X - c) closest to ``du`` in the mass norm."""
+    nb = start.size - 1
+    blk = np.repeat(np.arange(nb), np.diff(start))
+    c = np.add.reduceat(X * mass[:, None], start[:-1]) / np.add.reduceat(mass, start[:-1])[:, None]
+    phi = np.column_stack([np.ones(X.shape[0]), X - c[blk]])                   # (n, 4)
+    wphi = mass[:, None] * phi
+    A = np.add.reduceat(wphi[:, :, None] * phi[:, None, :], start[:-1])        # (nb, 4, 4)
+    b = np.add.reduceat(wphi[:, :, None] * du[:, None, :], start[:-1])         # (nb, 4, 3)
+    coef = np.linalg.solve(A + 1e-30 * np.eye(4), b)
+    rest = du - np.einsum("ni,nik->nk", phi, coef[blk])
+    total = float((mass[:, None] * du * du).sum())
+    rest_b = np.bincount(blk, (mass[:, None] * rest * rest).sum(axis=1), minlength=nb)
+    return (1.0 - rest_b.sum() / total if total > 0.0 else 1.0), rest_b
 
 
 class _Done(Exception):
@@ -34,9 +57,10 @@ class _Done(Exception):
 class Monitor:
     """Residual ratio per call, coarse corrections, and the probe of one attempt."""
 
-    def __init__(self, sim, rows, probe, trace, top):
+    def __init__(self, sim, rows, probe, trace, top, window):
         self.last_row = sim.increment + rows
-        self.probe, self.trace, self.top = probe, trace, top
+        self.probe, self.trace, self.top, self.window = probe, trace, top, window
+        self.u_window = None   # displacements ``window`` iterations before the probe
         self.calls = []        # (row, iterations of the attempt, residual ratio, status)
         self.nodes = None      # probed nodes; their residual per traced iteration
         self.res, self.u = [], []
@@ -48,8 +72,11 @@ class Monitor:
             raise _Done
         if self.calls and done < self.calls[-1][1] and self.report is None:
             self.nodes, self.res, self.u = None, [], []   # a new attempt: probe that one
+            self.u_window = None
         self.calls.append((sim.increment + 1, done, float(info[R.I_RESID]), int(info[R.I_STATUS])))
         d = sim.dyn
+        if self.report is None and self.u_window is None and done >= self.probe - self.window:
+            self.u_window = d.U.copy()
         if self.report is None and done >= self.probe:
             r = d.res * d.free
             if self.nodes is None:
@@ -75,26 +102,37 @@ class Monitor:
         comp = tr[:, np.arange(self.top), k]           # (trace, top)
         flips = (np.diff(np.sign(comp), axis=0) != 0).sum(axis=0)
         period = 2.0 * (tr.shape[0] - 1) / max(int(flips.max()), 1)
+        from dr_masonry.kernels.plastic_damage import MS_DC, MS_DT
+        m, d = sim.model, sim.dyn
+        share, rest = affine_share((self.u[0] - self.u_window) * d.free, 1.0 / d.minv, m.nodes,
+                                   np.asarray(m.block_node_start))
+        s = sim.mesh.s_new
+        dmg = np.zeros(m.n_blocks)
+        np.maximum.at(dmg, np.asarray(m.element_block), np.maximum(s[:, :, MS_DT], s[:, :, MS_DC]).max(axis=1))
         return dict(row=sim.increment + 1, at_iteration=self.probe,
                     top1pct_share=float(share),
                     worst_blocks=" ".join(f"{b}:{blocks[b] / rn2.sum():.2f}" for b in worst),
                     creep_cosine=creep, worst_nodes=" ".join(map(str, self.nodes)),
                     sign_changes=" ".join(map(str, flips)), ringing_period=period,
-                    amplitude_N=float(np.abs(comp).max()))
+                    amplitude_N=float(np.abs(comp).max()), window=self.window,
+                    affine_share=share,
+                    rest_in_damaged=float(rest[dmg > 0.1].sum() / max(rest.sum(), 1e-300)),
+                    damaged_blocks=int((dmg > 0.1).sum()))
 
 
 def main(argv=None):
     params = common.start(DEFAULTS, __doc__, argv)
     from dr_masonry.params import ParameterError
     import dr_masonry.solver as S
-    for key, low in (("rows", 1), ("probe", 0), ("trace", 2), ("top", 1)):
+    for key, low in (("rows", 1), ("probe", 0), ("trace", 2), ("top", 1), ("window", 1)):
         if params[key] < low:
             raise ParameterError(f"parameter {key}={params[key]!r}: must be >= {low}")
     sim, stages, copy = common.stored_run(params["scene"], params["file"], "slow_increment")
     sim.options.check_every = 1
     S.CALL_ITERATIONS = 1
     sim.resume(copy)
-    mon = Monitor(sim, params["rows"], params["probe"], params["trace"], params["top"])
+    mon = Monitor(sim, params["rows"], params["probe"], params["trace"], params["top"],
+                  params["window"])
     sim.monitors.append(mon)
     counts = (0, 0)
     try:
