@@ -104,7 +104,7 @@ class Monitor:
         period = 2.0 * (tr.shape[0] - 1) / max(int(flips.max()), 1)
         from dr_masonry.kernels.plastic_damage import MS_DC, MS_DT
         m, d = sim.model, sim.dyn
-        share, rest = affine_share((self.u[0] - self.u_window) * d.free, 1.0 / d.minv, m.nodes,
+        aff, rest = affine_share((self.u[0] - self.u_window) * d.free, 1.0 / d.minv, m.nodes,
                                    np.asarray(m.block_node_start))
         s = sim.mesh.s_new
         dmg = np.zeros(m.n_blocks)
@@ -115,7 +115,7 @@ class Monitor:
                     creep_cosine=creep, worst_nodes=" ".join(map(str, self.nodes)),
                     sign_changes=" ".join(map(str, flips)), ringing_period=period,
                     amplitude_N=float(np.abs(comp).max()), window=self.window,
-                    affine_share=share,
+                    affine_share=aff,
                     rest_in_damaged=float(rest[dmg > 0.1].sum() / max(rest.sum(), 1e-300)),
                     damaged_blocks=int((dmg > 0.1).sum()))
 
