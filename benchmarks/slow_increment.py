@@ -35,10 +35,11 @@ def affine_share(du, mass, X, start):
     """Mass-weighted share of the node motion ``du`` (n, 3) (m) that the blocks' affine motions
     carry, and the squared mass norm of the rest per block (nb,): per block (nodes
     ``start[b]:start[b + 1]``, coordinates ``X`` (n, 3), masses ``mass`` (n,)) the affine field
-    a + B (X - c) closest to ``du`` in the mass norm."""
+    a + B (X - c) closest to ``du`` in the mass norm (massless nodes do not count)."""
     nb = start.size - 1
     blk = np.repeat(np.arange(nb), np.diff(start))
-    c = np.add.reduceat(X * mass[:, None], start[:-1]) / np.add.reduceat(mass, start[:-1])[:, None]
+    msum = np.maximum(np.add.reduceat(mass, start[:-1]), 1e-300)[:, None]
+    c = np.add.reduceat(X * mass[:, None], start[:-1]) / msum
     phi = np.column_stack([np.ones(X.shape[0]), X - c[blk]])                   # (n, 4)
     wphi = mass[:, None] * phi
     A = np.add.reduceat(wphi[:, :, None] * phi[:, None, :], start[:-1])        # (nb, 4, 4)
@@ -104,8 +105,9 @@ class Monitor:
         period = 2.0 * (tr.shape[0] - 1) / max(int(flips.max()), 1)
         from dr_masonry.kernels.plastic_damage import MS_DC, MS_DT
         m, d = sim.model, sim.dyn
-        aff, rest = affine_share((self.u[0] - self.u_window) * d.free, 1.0 / d.minv, m.nodes,
-                                   np.asarray(m.block_node_start))
+        mass = np.divide(1.0, d.minv, out=np.zeros_like(d.minv), where=d.minv > 0.0)
+        aff, rest = affine_share((self.u[0] - self.u_window) * d.free, mass, m.nodes,
+                                 np.asarray(m.block_node_start))
         s = sim.mesh.s_new
         dmg = np.zeros(m.n_blocks)
         np.maximum.at(dmg, np.asarray(m.element_block), np.maximum(s[:, :, MS_DT], s[:, :, MS_DC]).max(axis=1))
