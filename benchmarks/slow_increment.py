@@ -109,8 +109,9 @@ class Monitor:
         aff, rest = affine_share((self.u[0] - self.u_window) * d.free, mass, m.nodes,
                                  np.asarray(m.block_node_start))
         s = sim.mesh.s_new
-        dmg = np.zeros(m.n_blocks)
-        np.maximum.at(dmg, np.asarray(m.element_block), np.maximum(s[:, :, MS_DT], s[:, :, MS_DC]).max(axis=1))
+        dmg = np.zeros(m.n_blocks)   # each block's largest brick damage
+        np.maximum.at(dmg, np.asarray(m.element_block),
+                      np.maximum(s[:, :, MS_DT], s[:, :, MS_DC]).max(axis=1))
         return dict(row=sim.increment + 1, at_iteration=self.probe,
                     top1pct_share=float(share),
                     worst_blocks=" ".join(f"{b}:{blocks[b] / rn2.sum():.2f}" for b in worst),

@@ -413,4 +413,3 @@ def test_a_return_mapping_short_of_its_tolerance_is_reported():
                                             r"of element 1 \(block 0\)") as got:
         sim.run(stages)
     assert sum("return mapping" in str(w.message) for w in got) == 1   # once per run
-
