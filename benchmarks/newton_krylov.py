@@ -17,11 +17,18 @@ control, whose load factor is an unknown too, are refused):
   space added (:mod:`dr_masonry.coarse`): GMRES's own residual, the true one recomputed at its
   answer, and the residual ratio after a backtracking line search (each product is one force
   evaluation, the cost of about one relaxation iteration);
+* preconditioned nonlinear conjugate gradients (Polak-Ribiere+, restarted along the preconditioned
+  force where the curvature turns negative) from the frozen state, with each preconditioner, for
+  at most ``cg`` force evaluations: per iteration one secant product along the search direction
+  (at the previous step length) and one true out-of-balance force; the evaluations it takes to
+  reach the solver's tolerance, or the ratio it has when the budget ends (BENCHMARKS.md section
+  65);
 
 then lets the relaxation finish the row from the frozen state and reports its iterations (with
 those of the attempts it cut, if the stall rule cut the probed one). Run:
 ``NUMBA_NUM_THREADS=1 python benchmarks/newton_krylov.py [scene=squat_wall row=17 at=2000
-krylov=200 h=1e-8]`` (about 30 s); writes ``benchmarks/out/newton_krylov*.csv``.
+krylov=200 h=1e-8 cg=3000]`` (about 1 min; ``cg=0`` skips the conjugate gradients); writes
+``benchmarks/out/newton_krylov*.csv``.
 """
 import os
 
@@ -29,7 +36,7 @@ import numpy as np
 
 import common
 
-DEFAULTS = dict(scene="squat_wall", row=17, at=2000, krylov=200, h=1e-8, seed=1)
+DEFAULTS = dict(scene="squat_wall", row=17, at=2000, krylov=200, h=1e-8, seed=1, cg=3000)
 
 
 class _Done(Exception):
@@ -137,12 +144,56 @@ class Probe:
                     ratio_after=float(after), force_evaluations=self.evals - e0)
 
 
+    def conjugate_gradients(self, evals, coarse):
+        """Nonlinear preconditioned CG from x0 for at most ``evals`` force evaluations: a table
+        row. The step along the search direction p is d.r / d.q with q the secant product
+        (r - F(x + a p)) / a at the last step length a (1 at the start, the fictitious masses'
+        step)."""
+        e0, tol = self.evals, self.sim.options.tol
+        x, r, ratio = self.x0.copy(), self.F0.copy(), self.ratio0
+        z = self.precondition(r, coarse)
+        p, rz, a_try = z.copy(), r @ z, 1.0
+        its, restarts, best, status = 0, 0, ratio, "budget spent"
+        while self.evals - e0 < evals:
+            q = (r - self.F(x + a_try * p)) / a_try
+            pq = p @ q
+            if not np.isfinite(pq):
+                status = "non-finite forces"
+                break
+            if pq <= 0.0:   # negative curvature along p: restart along z with a shorter trial
+                restarts += 1
+                p, a_try = z.copy(), 0.5 * a_try
+                continue
+            a = (p @ r) / pq
+            x = x + a * p
+            its += 1
+            rn = self.F(x)
+            ratio = self.ratio()
+            if not np.isfinite(ratio):
+                status = "non-finite forces"
+                break
+            best = min(best, ratio)
+            if ratio < tol:
+                status = "converged"
+                break
+            zn = self.precondition(rn, coarse)
+            beta = max(0.0, zn @ (rn - r) / rz)
+            r, z, rz = rn, zn, rn @ zn
+            p = z + beta * p
+            a_try = min(max(a, 0.1 * a_try), 10.0 * a_try)
+        self.F(self.x0)   # back to the frozen state
+        return dict(preconditioner="masses + coarse" if coarse else "masses", status=status,
+                    iterations=its, force_evaluations=self.evals - e0,
+                    negative_curvature_restarts=restarts, ratio_before=self.ratio0,
+                    ratio_at_end=float(ratio), lowest_ratio=float(best))
+
+
 class Monitor:
     """Probe row ``row`` once ``at`` iterations into it; stop when the row is committed."""
 
     def __init__(self, params):
         self.p = params
-        self.rows, self.newton, self.frozen_at = None, None, 0
+        self.rows, self.newton, self.cg, self.frozen_at = None, None, [], 0
 
     def __call__(self, sim, info, done):
         row = self.p["row"]
@@ -173,6 +224,8 @@ class Monitor:
                 np.linalg.norm(auv - au - pr.A(v)) / np.linalg.norm(auv)),
                 odd_symmetry=float(np.linalg.norm(pr.A(-u) + au) / np.linalg.norm(au))))
         self.newton = [pr.newton_step(self.p["krylov"], coarse) for coarse in (False, True)]
+        if self.p["cg"] > 0:
+            self.cg = [pr.conjugate_gradients(self.p["cg"], coarse) for coarse in (False, True)]
         sim._restore(snap)
         R.place_rigid_nodes(sim.dyn)
 
@@ -211,6 +264,11 @@ def main(argv=None):
     common.report(mon.newton, "newton_krylov_step",
                   f"one Newton step; the relaxation {what} {total - mon.frozen_at:,} iterations "
                   f"later ({total:,} in all)")
+    if mon.cg:
+        common.report(mon.cg, "newton_krylov_cg",
+                      f"nonlinear conjugate gradients from the frozen state (tol "
+                      f"{sim.options.tol:g}); the relaxation {what} {total - mon.frozen_at:,} "
+                      f"iterations later")
 
 
 if __name__ == "__main__":
