@@ -143,10 +143,9 @@ class Probe:
                     line_search_step=step, ratio_before=self.ratio0,
                     ratio_after=float(after), force_evaluations=self.evals - e0)
 
-
     def conjugate_gradients(self, evals, coarse):
         """Nonlinear preconditioned CG from x0 for at most ``evals`` force evaluations: a table
-        row. The step along the search direction p is d.r / d.q with q the secant product
+        row. The step along the search direction p is p.r / p.q with q the secant product
         (r - F(x + a p)) / a at the last step length a (1 at the start, the fictitious masses'
         step)."""
         e0, tol = self.evals, self.sim.options.tol
