@@ -26,8 +26,9 @@ control, whose load factor is an unknown too, are refused):
 
 then lets the relaxation finish the row from the frozen state and reports its iterations (with
 those of the attempts it cut, if the stall rule cut the probed one). Run:
-``NUMBA_NUM_THREADS=1 python benchmarks/newton_krylov.py [scene=squat_wall row=17 at=2000
-krylov=200 h=1e-8 cg=3000]`` (about 1 min; ``cg=0`` skips the conjugate gradients); writes
+``NUMBA_NUM_THREADS=1 python benchmarks/newton_krylov.py [scene=squat_wall args= row=17 at=2000
+krylov=200 h=1e-8 cg=3000]`` (about 1 min; ``cg=0`` skips the conjugate gradients; ``args``: the
+scene's own parameters, space-separated, e.g. ``args=protocol=cyclic``); writes
 ``benchmarks/out/newton_krylov*.csv``.
 """
 import os
@@ -36,7 +37,7 @@ import numpy as np
 
 import common
 
-DEFAULTS = dict(scene="squat_wall", row=17, at=2000, krylov=200, h=1e-8, seed=1, cg=3000)
+DEFAULTS = dict(scene="squat_wall", args="", row=17, at=2000, krylov=200, h=1e-8, seed=1, cg=3000)
 
 
 class _Done(Exception):
@@ -237,7 +238,8 @@ def main(argv=None):
     from dr_masonry.scene import scene_params
     mod = import_case(params["scene"])
     out = os.path.join(common.OUT, "newton_krylov_run")
-    run = scene_params(mod.PARAMS, getattr(mod, "FAST", None), [f"out={out}", "maps="], mod.__doc__)
+    run = scene_params(mod.PARAMS, getattr(mod, "FAST", None),
+                       [f"out={out}", "maps="] + params["args"].split(), mod.__doc__)
     run["progress"] = False
     sim, stages = mod.build(run)
     if any(isinstance(c, Indirect) for st in stages for c in st.controls):
