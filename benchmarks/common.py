@@ -72,6 +72,19 @@ def child_row(script, overrides, env=None):
     return json.loads(res.stdout.strip().splitlines()[-1])
 
 
+def built_scene(scene, args, name):
+    """(simulation, stages) of scene ``scene`` built (not run) with its parameters ``args``
+    (space-separated ``key=value`` overrides of the case's ``PARAMS``), writing its results to
+    ``out/<name>.h5`` and no maps or progress bar."""
+    from dr_masonry.cli import import_case
+    from dr_masonry.scene import scene_params
+    mod = import_case(scene)
+    run = scene_params(mod.PARAMS, getattr(mod, "FAST", None),
+                       [f"out={os.path.join(OUT, name)}", "maps="] + args.split(), mod.__doc__)
+    run["progress"] = False
+    return mod.build(run)
+
+
 def stored_run(scene, path, name):
     """(simulation, stages, copy) of scene ``scene`` set up from ``copy`` = ``out/<name>.h5``, a
     copy of its result file ``path``, with the parameters stored in it (not yet resumed:

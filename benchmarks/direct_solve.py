@@ -63,14 +63,7 @@ def stiffness(sim):
 def main(argv=None):
     params = common.start(DEFAULTS, __doc__, argv)
     import scipy.sparse.linalg as spla
-    from dr_masonry.cli import import_case
-    from dr_masonry.scene import scene_params
-    mod = import_case(params["scene"])
-    extra = [a for a in params["args"].split() if a]
-    run = scene_params(mod.PARAMS, getattr(mod, "FAST", None),
-                       [f"out={common.OUT}/direct_solve_run", "maps="] + extra, mod.__doc__)
-    run["progress"] = False
-    sim, _ = mod.build(run)
+    sim, _ = common.built_scene(params["scene"], params["args"], "direct_solve_run")
     sim.build()
     t = time.perf_counter()
     K, free = stiffness(sim)

@@ -31,8 +31,6 @@ krylov=200 h=1e-8 cg=3000]`` (about 1 min; ``cg=0`` skips the conjugate gradient
 scene's own parameters, space-separated, e.g. ``args=protocol=cyclic``); writes
 ``benchmarks/out/newton_krylov*.csv``.
 """
-import os
-
 import numpy as np
 
 import common
@@ -232,16 +230,9 @@ class Monitor:
 
 def main(argv=None):
     params = common.start(DEFAULTS, __doc__, argv)
-    from dr_masonry.cli import import_case
     from dr_masonry.loading import Indirect
     from dr_masonry.params import ParameterError
-    from dr_masonry.scene import scene_params
-    mod = import_case(params["scene"])
-    out = os.path.join(common.OUT, "newton_krylov_run")
-    run = scene_params(mod.PARAMS, getattr(mod, "FAST", None),
-                       [f"out={out}", "maps="] + params["args"].split(), mod.__doc__)
-    run["progress"] = False
-    sim, stages = mod.build(run)
+    sim, stages = common.built_scene(params["scene"], params["args"], "newton_krylov_run")
     if any(isinstance(c, Indirect) for st in stages for c in st.controls):
         raise ParameterError(f"parameter scene={params['scene']!r}: the scene loads by indirect "
                              f"control, whose load factor is an unknown of the increment; the "
