@@ -268,7 +268,7 @@ def test_writes_the_disk_could_not_hold_are_refused_before_they_start(tmp_path, 
     """A disk filled by the run: HDF5 cannot undo a write that fails midway (a full disk left a
     file that did not open, a flood of h5py errors and a segmentation fault); each write is
     refused before it starts, naming the file, the free space and what it needed."""
-    import dr_masonry.results as results
+    import dr_masonry.results.writer as results
     p = tmp_path / "r.h5"
     write_fake_result(p)
     free = {"bytes": results.SPACE_RESERVE + 100}
@@ -301,7 +301,7 @@ def test_writes_the_disk_could_not_hold_are_refused_before_they_start(tmp_path, 
 def test_a_file_a_running_process_writes_is_read_with_a_warning(tmp_path):
     """`dr-masonry info` on a run still going: HDF5's lock refused the read ('unable to lock
     file'); the file is read as of its last row, with a warning naming it."""
-    import dr_masonry.results as results
+    import dr_masonry.results.reader as results
     p = tmp_path / "r.h5"
     write_fake_result(p)
     holder = subprocess.Popen([sys.executable, "-c", textwrap.dedent(f"""
@@ -381,7 +381,7 @@ def test_pack_keeps_history_checkpoint_and_chosen_frames(tmp_path, monkeypatch):
     assert open_result(q).n_history == 6
     pack(p, q, frames="all")
     assert open_result(q).frame_ids == [0, 2, 4]
-    import dr_masonry.results as results
+    import dr_masonry.results.packing as results
 
     def full_disk(a, b):
         raise OSError(28, "No space left on device")
@@ -394,7 +394,7 @@ def test_pack_keeps_history_checkpoint_and_chosen_frames(tmp_path, monkeypatch):
 def test_git_revision_of_a_checkout(tmp_path):
     """The revision recorded with a run: a repository's short HEAD, ``.dirty`` with uncommitted
     changes to tracked files; nothing for a folder that is not the top of a work tree."""
-    from dr_masonry.results import _git_revision, code_version
+    from dr_masonry.results.schema import _git_revision, code_version
     assert _git_revision(str(tmp_path)) == ""            # no repository
     git = ["git", "-C", str(tmp_path), "-c", "user.name=t", "-c", "user.email=t@example.org"]
     subprocess.run(git + ["init", "-q"], check=True)
