@@ -1,4 +1,4 @@
-"""Thrust-line lower bound for an arch of rigid voussoirs (no tension, no sliding), by linear programming.
+"""Thrust-line lower bound for an arch of rigid voussoirs (no tension, no sliding), as an LP.
 
 Written independently of the solver: the references of the arch scenes and tests.
 
@@ -6,8 +6,9 @@ The arch lies in the (x, z) plane, centre of the circles at the origin, crown on
 (``0..n``, left springing to right springing) is the radial segment at angle ``theta_i`` from +x,
 between the intrados (radius ``R - t/2``) and extrados (``R + t/2``) circles; voussoir ``k`` is the
 quadrilateral between joints ``k`` and ``k + 1``. Unknowns per joint: the force ``F_i = (Fx, Fz)``
-the left part exerts on the right part and its moment ``M_i`` about the joint's centre. No tension:
-``N_i = F_i . n_i >= 0``; the thrust line inside the joint: ``|M_i| <= N_i t / 2``; friction unbounded.
+the left part exerts on the right part and its moment ``M_i`` about the joint's centre. No
+tension: ``N_i = F_i . n_i >= 0``; the thrust line inside the joint: ``|M_i| <= N_i t / 2``;
+friction unbounded.
 Loads: each voussoir's weight ``W_k`` (N per m of depth, unit weight ``gamma``) down and ``lam W_k``
 along +x (a tilting table, ``lam = tan(tilt)``).
 """
@@ -113,7 +114,8 @@ def collapse_factor(R, t, n, embrace=math.pi, gamma=1.0):
     res = linprog(cost, A_ub=band, b_ub=np.zeros(len(band)), A_eq=A, b_eq=b, bounds=bounds,
                   method="highs")
     if res.status != 0:
-        raise RuntimeError(f"arch R={R} t={t} n={n}: not even stable under self-weight ({res.message})")
+        raise RuntimeError(f"arch R={R} t={t} n={n}: not even stable under self-weight "
+                           f"({res.message})")
     return ArchLP(float(res.x[-1]), *_hinges(res.x, t, theta))
 
 
