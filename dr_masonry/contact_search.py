@@ -39,7 +39,7 @@ from scipy.spatial import cKDTree
 
 from .block_faces import (_canonical_quads, _ccw, _face_of_quads, _faces, _plane_frame, _to_plane,
                           clipped_area, element_edge, master_sides, overhang, project_bilinear,
-                          quad_points)
+                          quad_points)  # noqa: F401 (master_sides, overhang: re-exported)
 from .kernels.contact_frame import local_gap
 from .model import ModelError, quad_normal
 
