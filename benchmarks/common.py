@@ -140,3 +140,22 @@ def timed(fn, args, repeats, min_time):
             fn(*args)
         per.append((time.perf_counter() - t0) / n)
     return min(per), float(np.median(per))
+
+
+def relax_args(sim, iters, alpha=1.0, ring=None):
+    """Arguments of ``kernels.relaxation.relax`` on ``sim``: viscous damping ``alpha`` (0: no
+    Rayleigh-quotient damping), ring damping ``ring`` (default the options'), no load factor or
+    control, tol 0 (it runs all ``iters`` iterations), run-away limit half the model's size."""
+    from dr_masonry.kernels import relaxation as R
+    ring = sim.options.damping.ring if ring is None else ring
+    crit = R.Criteria(0.0, float(sim.ref_floor), 0.0, 0.0, 10, 0, 0.5 * sim.size, 0.0, int(iters))
+    return [sim.mesh, sim.cont, sim.dyn, np.zeros(1), np.zeros(3, dtype=np.int64), 1.0,
+            float(alpha), float(ring), crit, R.start_progress()]
+
+
+def check_ran(out):
+    """Raise unless the ``relax`` call that returned ``out`` ran all its iterations."""
+    from dr_masonry.kernels.relaxation import ST_MAXITER
+    if out[0].status != ST_MAXITER:
+        raise RuntimeError(f"relax stopped early (status {out[0].status}); the steps were not all "
+                           f"taken, so the timing would be wrong")

@@ -51,13 +51,13 @@ def child(params):
     else:
         sim = wall_state(params["rows"], params["mesh"])
     m, c, d, o = sim.mesh, sim.cont, sim.dyn, sim.options
-    info = np.zeros(R.N_INFO)
     n = params["iters"]
+    crit = R.Criteria(0.0, float(sim.ref_floor), 0.0, 0.0, o.convergence.check_every, 0,
+                      0.5 * sim.size, 0.0, n)
 
     def iterations():
-        info[:] = 0.0
-        R.relax(m, c, d, sim.lam, np.zeros(3, np.int64), 1.0, R.DAMP_VISCOUS, o.alpha, o.ring, 0.0,
-                sim.ref_floor, n, o.check_every, 0, 0.5 * sim.size, info)
+        R.relax(m, c, d, sim.lam, np.zeros(3, np.int64), 1.0, o.damping.alpha, o.damping.ring,
+                crit, R.start_progress())
 
     def pieces(f):
         return lambda: [f() for _ in range(n)]

@@ -38,7 +38,7 @@ def callee_signatures(mesh, cont, dyn):
     nr = dyn.rpX.shape[0]
     rpres = np.zeros((nr, 6))
     parts = np.zeros((1, 4))
-    lam, flag, scheme = 0.0, True, R.DAMP_VISCOUS
+    lam, flag = 0.0, True
     hbuf = mesh.fbuf.reshape((-1, 3))
     sigs = {
         "forces": [("element_and_contact_forces", (dyn.X, dyn.U, mesh, cont)),
@@ -49,7 +49,7 @@ def callee_signatures(mesh, cont, dyn):
                   ("rp_residual", (dyn, lam, rpres)),
                   ("residual", (dyn, lam, rpres)),
                   ("norms", (dyn, lam, rpres)),
-                  ("update_nodes", (dyn, lam, flag, scheme, lam, lam, lam, lam, lam, lam, parts)),
+                  ("update_nodes", (dyn, lam, flag, lam, lam, parts)),
                   ("worst_place", (dyn, lam)),
                   ("stored_energy", (mesh, cont)),     # also callees of ``internal_forces``,
                   ("gather_pair", (hbuf, mesh.ptr, mesh.rows, cont.fbuf, cont.ptr, cont.rows,
