@@ -21,7 +21,6 @@ rows=0]`` (``rows`` > 0 stops after that many committed rows); writes ``benchmar
 balance_split.csv``.
 """
 import importlib
-import types
 
 import numpy as np
 
@@ -48,51 +47,55 @@ def split_rows(sim, stages, rows=0):
     from dr_masonry.kernels.joint_law import JS_DISS
     from dr_masonry.kernels.plastic_damage import MS_DISS
     out, prev = [], {}
-    commit = sim._commit
 
-    def recording_commit(self, info, elapsed, energies):
-        c, m, d = self.cont, self.mesh, self.dyn
-        act = m.active
-        state = dict(g=c.gaps.copy(), t=c.trac.copy(), psi=c.psi.copy(),
-                     dis=c.s_new[:, JS_DISS] * c.area, fc=c.fbuf.reshape(-1, 5, 3).copy(),
-                     nodes=np.column_stack([c.slave, c.master]), U=d.U.copy(),
-                     fh=m.fbuf[act].copy(), eh=m.energy[act].copy(),
-                     dh=(m.s_new[act, :, MS_DISS] * m.wdet[act]).sum(axis=1))
-        w_before = self.energy["W_ext"]
-        commit(info, elapsed, energies)
-        state["res"] = np.where(d.free > 0, d.res, 0.0)   # (commit evaluates the residual)
-        if prev and prev["g"].shape == state["g"].shape:
-            stored = (state["psi"] - prev["psi"]) + (state["dis"] - prev["dis"])
-            work = c.area * (0.5 * (prev["t"] + state["t"]) * (state["g"] - prev["g"])).sum(axis=1)
-            err = work - stored
-            du = state["U"] - prev["U"]
-            # the same in nodal forces and displacements: includes the turning of the frames
-            nodal = ((0.5 * (prev["fc"] + state["fc"]) * du[state["nodes"]]).sum(axis=(1, 2))
-                     - stored)
-            hex_work = (0.5 * (prev["fh"] + state["fh"]) * du[m.conn[act]]).sum()
-            blocks = hex_work - (state["eh"] - prev["eh"]).sum() - (state["dh"] - prev["dh"]).sum()
-            res_work = (0.5 * (prev["res"] + state["res"]) * du).sum()
-            # points re-paired by the sliding check (another master quad) since the last row
-            moved = np.any(prev["nodes"] != state["nodes"], axis=1)
-            # slave nodes off their master face: paired with a tangential offset gap0
-            off_face = np.abs(c.gap0).max(axis=1) > 1e-9
-            cross = np.sign(prev["g"][:, 0]) != np.sign(state["g"][:, 0])
-            out.append(dict(row=self.increment, balance_error=self.history["balance_error"][-1],
-                            W_gross=self.energy["W_gross"],
-                            dW_ext=self.energy["W_ext"] - w_before, joints=float(err.sum()),
-                            crossing=float(err[cross].sum()), n_crossing=int(cross.sum()),
-                            others=float(err[~cross].sum()), joints_nodal=float(nodal.sum()),
-                            n_repaired=int(moved.sum()),
-                            nodal_minus_local_repaired=float((nodal - err)[moved].sum()),
-                            n_off_face=int(off_face.sum()),
-                            nodal_minus_local_off_face=float((nodal - err)[off_face].sum()),
-                            blocks=float(blocks), residual=float(res_work)))
-            print(" ".join(f"{k}={v:.5g}" for k, v in out[-1].items()), flush=True)
-        prev.update(state)
-        if rows and len(out) >= rows:
-            raise _Done
+    class Recorder:
+        """An observer of the committed rows (``Simulation.observers``)."""
 
-    sim._commit = types.MethodType(recording_commit, sim)
+        def row(self, sim, row):
+            c, m, d = sim.cont, sim.mesh, sim.dyn
+            act = m.active
+            state = dict(g=c.gaps.copy(), t=c.trac.copy(), psi=c.psi.copy(),
+                         dis=c.s_old[:, JS_DISS] * c.area, fc=c.fbuf.reshape(-1, 5, 3).copy(),
+                         nodes=np.column_stack([c.slave, c.master]), U=d.U.copy(),
+                         fh=m.fbuf[act].copy(), eh=m.energy[act].copy(),
+                         dh=(m.s_old[act, :, MS_DISS] * m.wdet[act]).sum(axis=1),
+                         res=np.where(d.free > 0, d.res, 0.0))
+            w_ext = sim.energy.totals["W_ext"]
+            if prev and prev["g"].shape == state["g"].shape:
+                stored = (state["psi"] - prev["psi"]) + (state["dis"] - prev["dis"])
+                work = c.area * (0.5 * (prev["t"] + state["t"])
+                                 * (state["g"] - prev["g"])).sum(axis=1)
+                err = work - stored
+                du = state["U"] - prev["U"]
+                # the same in nodal forces and displacements: includes the turning of the frames
+                nodal = ((0.5 * (prev["fc"] + state["fc"]) * du[state["nodes"]]).sum(axis=(1, 2))
+                         - stored)
+                hex_work = (0.5 * (prev["fh"] + state["fh"]) * du[m.conn[act]]).sum()
+                blocks = (hex_work - (state["eh"] - prev["eh"]).sum()
+                          - (state["dh"] - prev["dh"]).sum())
+                res_work = (0.5 * (prev["res"] + state["res"]) * du).sum()
+                # points re-paired by the sliding check (another master quad) since the last row
+                moved = np.any(prev["nodes"] != state["nodes"], axis=1)
+                # slave nodes off their master face: paired with a tangential offset gap0
+                off_face = np.abs(c.gap0).max(axis=1) > 1e-9
+                cross = np.sign(prev["g"][:, 0]) != np.sign(state["g"][:, 0])
+                out.append(dict(row=sim.increment, balance_error=sim.history["balance_error"][-1],
+                                W_gross=sim.energy.totals["W_gross"],
+                                dW_ext=w_ext - prev["w_ext"], joints=float(err.sum()),
+                                crossing=float(err[cross].sum()), n_crossing=int(cross.sum()),
+                                others=float(err[~cross].sum()), joints_nodal=float(nodal.sum()),
+                                n_repaired=int(moved.sum()),
+                                nodal_minus_local_repaired=float((nodal - err)[moved].sum()),
+                                n_off_face=int(off_face.sum()),
+                                nodal_minus_local_off_face=float((nodal - err)[off_face].sum()),
+                                blocks=float(blocks), residual=float(res_work)))
+                print(" ".join(f"{k}={v:.5g}" for k, v in out[-1].items()), flush=True)
+            state["w_ext"] = w_ext
+            prev.update(state)
+            if rows and len(out) >= rows:
+                raise _Done
+
+    sim.observers.append(Recorder())
     try:
         sim.run(stages)
     except _Done:

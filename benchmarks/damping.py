@@ -48,8 +48,8 @@ PARAMS = dict(
 
 def run_stages(sim, stages, params):
     """Run stage by stage; returns (per-stage list of (name, iterations array), wall s, error)."""
-    sim.options.max_iter = params["max_iter"]
-    sim.options.max_cuts = params["max_cuts"]
+    sim.options.increments.max_iter = params["max_iter"]
+    sim.options.increments.max_cuts = params["max_cuts"]
     out, err = [], ""
     t0 = time.perf_counter()
     for st in stages:

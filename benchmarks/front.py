@@ -39,7 +39,6 @@ Run: ``python benchmarks/front.py [key=value ...]``; writes
 ``benchmarks/out/front_<problem><tag>.csv`` and ``.png`` (wall time against error, log-log; the
 default setting circled in red).
 """
-import dataclasses
 import hashlib
 import itertools
 import json
@@ -99,7 +98,7 @@ def timed_run(sim, stages, safety, coarse, gap_tol=0.0):
     Returns (history dict of arrays, wall time s, "" or the SolverError message).
     """
     from dr_masonry import SolverError
-    sim.options = dataclasses.replace(sim.options, safety=safety, coarse=coarse, gap_tol=gap_tol)
+    sim.options = sim.options.replace(safety=safety, coarse=coarse, gap_tol=gap_tol)
     t0 = time.perf_counter()
     err = ""
     with warnings.catch_warnings():

@@ -93,9 +93,9 @@ class Probe:
         from dr_masonry.kernels import relaxation as R
         s, d = self.sim, self.sim.dyn
         rn, ref = R.norms(d, self.lam, self.rpres)
-        o = s.options
-        rb = (o.tol * R.block_imbalance(s.cont, d, self.lam, d.bratio)[0] / o.block_tol
-              if o.block_tol > 0 else 0.0)
+        c = s.options.convergence
+        rb = (c.tol * R.block_imbalance(s.cont, d, self.lam, d.bratio)[0] / c.block_tol
+              if c.block_tol > 0 else 0.0)
         return max(rn / max(ref, s.ref_floor), rb)
 
     def A(self, v):
@@ -147,7 +147,7 @@ class Probe:
         row. The step along the search direction p is p.r / p.q with q the secant product
         (r - F(x + a p)) / a at the last step length a (1 at the start, the fictitious masses'
         step)."""
-        e0, tol = self.evals, self.sim.options.tol
+        e0, tol = self.evals, self.sim.options.convergence.tol
         x, r, ratio = self.x0.copy(), self.F0.copy(), self.ratio0
         z = self.precondition(r, coarse)
         p, rz, a_try = z.copy(), r @ z, 1.0
@@ -201,7 +201,8 @@ class Monitor:
             return
         from dr_masonry.kernels import joint_law as J
         from dr_masonry.kernels import relaxation as R
-        snap = sim._snapshot()
+        from dr_masonry.solver import controls
+        snap = controls.snapshot(sim)
         pr = Probe(sim, self.p["h"])
         c = sim.cont
         damaging = int((c.s_new[:, J.JS_D] > c.s_old[:, J.JS_D]).sum())
@@ -224,7 +225,7 @@ class Monitor:
         self.newton = [pr.newton_step(self.p["krylov"], coarse) for coarse in (False, True)]
         if self.p["cg"] > 0:
             self.cg = [pr.conjugate_gradients(self.p["cg"], coarse) for coarse in (False, True)]
-        sim._restore(snap)
+        controls.restore(sim, snap)
         R.place_rigid_nodes(sim.dyn)
 
 
@@ -259,7 +260,7 @@ def main(argv=None):
     if mon.cg:
         common.report(mon.cg, "newton_krylov_cg",
                       f"nonlinear conjugate gradients from the frozen state (tol "
-                      f"{sim.options.tol:g}); the relaxation {what} {total - mon.frozen_at:,} "
+                      f"{sim.options.convergence.tol:g}); the relaxation {what} {total - mon.frozen_at:,} "
                       f"iterations later")
 
 

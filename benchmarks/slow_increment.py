@@ -67,14 +67,13 @@ class Monitor:
         self.res, self.u = [], []
         self.report = None
 
-    def __call__(self, sim, info, done):
-        from dr_masonry.kernels import relaxation as R
+    def __call__(self, sim, out, done):
         if sim.increment >= self.last_row:
             raise _Done
         if self.calls and done < self.calls[-1][1] and self.report is None:
             self.nodes, self.res, self.u = None, [], []   # a new attempt: probe that one
             self.u_window = None
-        self.calls.append((sim.increment + 1, done, float(info[R.I_RESID]), int(info[R.I_STATUS])))
+        self.calls.append((sim.increment + 1, done, out.residual, out.status))
         d = sim.dyn
         if self.report is None and self.u_window is None and done >= self.probe - self.window:
             self.u_window = d.U.copy()
@@ -131,7 +130,7 @@ def main(argv=None):
         if params[key] < low:
             raise ParameterError(f"parameter {key}={params[key]!r}: must be >= {low}")
     sim, stages, copy = common.stored_run(params["scene"], params["file"], "slow_increment")
-    sim.options.check_every = 1
+    sim.options.convergence.check_every = 1
     S.CALL_ITERATIONS = 1
     sim.resume(copy)
     mon = Monitor(sim, params["rows"], params["probe"], params["trace"], params["top"],

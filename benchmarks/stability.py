@@ -33,7 +33,6 @@ history written (converged increments, halves of cut increments included) agains
 Run: ``python benchmarks/stability.py [key=value ...]``; writes
 ``benchmarks/out/stability<tag>.csv``.
 """
-import dataclasses
 import json
 import os
 import re
@@ -90,7 +89,7 @@ def apply_change(sim, change, value):
     from dr_masonry.params import ParameterError
     m = sim.model
     if change == "safety":
-        sim.options = dataclasses.replace(sim.options, safety=value, allow_unstable=True)
+        sim.options = sim.options.replace(safety=value, allow_unstable=True)
     elif change == "joints":
         m.joint_laws[:] = [law.with_changes(knn=value * law.knn, kss=value * law.kss,
                                             kc_pen=value * law.kc_pen) for law in m.joint_laws]
@@ -120,9 +119,9 @@ def one(params):
     """Run one setting in this process; prints a JSON row."""
     sim, stages = build(params)
     apply_change(sim, params["change"], params["value"])
-    sim.options.max_iter = params["max_iter"]
-    sim.options.max_cuts = params["max_cuts"]
-    sim.options.coarse = params["coarse"]
+    sim.options.increments.max_iter = params["max_iter"]
+    sim.options.increments.max_cuts = params["max_cuts"]
+    sim.options.coarse.enabled = params["coarse"]
     exc, msg = "", ""
     t0 = time.perf_counter()
     with warnings.catch_warnings():

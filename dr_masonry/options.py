@@ -1,17 +1,25 @@
-"""Solver settings: :class:`SolverOptions`, each field checked on construction, and the
-names of the damping schemes (``DAMPING``: the codes of ``kernels.relaxation``)."""
+"""Solver settings: :class:`SolverOptions`, six groups of fields (:class:`Convergence`,
+:class:`Increments`, :class:`Damping`, :class:`Coarse`, :class:`Sliding`, :class:`Output`), each
+field checked when a run starts. docs/solver.md says what each field does and when to change it;
+the measurements behind the defaults are in docs/internals.md ("Decisions").
+
+Every field has one flat name, the keyword of ``SolverOptions(...)``, the scene parameter and
+the key stored in a result file (``config["solver"]``): the field's own name, except the damping
+scheme (``damping``) and the coarse correction's switch and span (``coarse``, ``coarse_every``).
+"""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
 from . import loading as L
-from .kernels import relaxation as R
 
-#: the damping schemes by name (``SolverOptions.damping``) and their kernel codes
-DAMPING = {"kinetic": R.DAMP_KINETIC, "viscous": R.DAMP_VISCOUS, "local": R.DAMP_LOCAL,
-           "fire": R.DAMP_FIRE}
+#: the damping schemes (``SolverOptions.damping``): "viscous" is the production scheme
+#: (``kernels.relaxation``), the others are in ``kernels.damping_schemes``
+DAMPING = ("viscous", "kinetic", "local", "fire")
+#: the default ``alpha`` of each scheme
+ALPHA_DEFAULT = {"viscous": 1.0, "local": 0.8, "kinetic": 0.0, "fire": 0.1}
 #: valid ``SolverOptions.alpha`` of each damping scheme: (test, what the message says)
 ALPHA_RANGE = {"viscous": (lambda a: a > 0, "> 0 (fraction of critical damping)"),
                "local": (lambda a: 0 <= a < 1, "in [0, 1) (Cundall's coefficient)"),
@@ -29,158 +37,220 @@ class OptionsError(ValueError):
 
 
 @dataclass
-class SolverOptions:
-    """Dynamic-relaxation settings (defaults chosen by the benchmarks, see BENCHMARKS.md).
+class Convergence:
+    """When an increment is converged.
 
-    damping : "viscous" (default) | "kinetic" | "local" | "fire" (FIRE, Bitzek et al. 2006:
-        converges everywhere tested but needs 1.5-10x the iterations of "viscous")
-    alpha : damping parameter (local: Cundall's coefficient, 0.8; viscous: fraction of the
-        critical damping of the Rayleigh-quotient frequency, 1.0; fire: initial velocity-mixing
-        factor alpha_start, 0.1)
-    ring : viscous damping: coefficient for the DOFs whose velocity reverses more often than every
-        5 iterations (0 <= ring < 2; 0: off). The damping of the whole motion follows its
-        Rayleigh quotient, which a local high-frequency oscillation dominates (frictional joints
-        that slide and stick keep one going); 1.0 damps it where it rings and leaves the rest to
-        the slow motion: the main job's first 30 rows need 27 % fewer iterations and the house's
-        plateau rows converge (BENCHMARKS.md section 27); 1.9 changed the peak's branch
-    tol : an increment is converged when ||out-of-balance|| <= tol * ||applied loads + reactions||
-    safety : fictitious masses = safety * Gershgorin row sum / 4 (stable for safety >= 1)
-    allow_unstable : accept ``safety`` < 1, a step beyond the stable one, for the stability
-        stress test (``benchmarks/stability.py``: the guards must catch what follows)
-    max_iter : iteration cap of one increment before it is cut in two
-    max_cuts : how many times an increment may be halved before the run stops
-    stall_iter : an increment whose residual ratio has not fallen 10 % below its best value
-        (``R.STALL_DROP``) for this many iterations is cut in two before ``max_iter`` (0: never).
-        At a mechanism's onset the relaxation can hover just above ``tol`` for the whole cap
-        while the two halves converge in a few thousand iterations each (BENCHMARKS.md, section
-        10); a relaxation that converges steadily is left alone (section 13) unless, at its rate
-        of the last ``stall_iter`` iterations, it would not reach ``tol`` within ``max_iter``
-        (then it is cut at once, section 15); at the last allowed cut the increment runs to
-        ``max_iter``
-    floor_tol : an increment that stops short of ``tol`` (stalled, too slow, or at ``max_iter``)
-        with its residual ratio at or below ``floor_tol`` is accepted instead of cut, with a
-        warning; 0 (default): never. Where joints chatter at a mechanism, the relaxation can
-        settle on a floor at 1-9 x ``tol`` that smaller steps do not remove; an accepted row is
-        then the middle of a snap, its load a few per cent off (BENCHMARKS.md sections 13 and
-        29), and the path after it can differ from the converged one (the S4 double-clamped
-        cyclic protocol with 1e-3 from its start took its first 0.2 % peak at 5.8e-4, -19.9 kN,
-        where cutting converged at -20.5 kN): set it on resuming a run that stopped, not
-        before; the history's ``residual`` column shows each row's ratio
-    gap_tol : also require the out-of-balance resultant along each translation that a control
-        drives to be at most this fraction of the driving force (that axis's largest of the run
-        so far where larger; ``kernels.relaxation.resultant``, history ``gap_ratio``) for an
-        increment to converge, and for a row at the floor to be accepted (the floor loosens
-        only the norm: a row stopped short above it is cut in two); 0 (default): off. The
-        residual ratio is a norm over every DOF against loads that gravity may dominate, so the
-        house's rows at the floor kept resultants of up to 17 % of the lateral load (median 6 %,
-        docs/validation.md, "Rows accepted at the residual floor"); the resultant bounds how far
-        the curve's force is from the converged one. Every row records ``gap.f*``, ``drive.f*``
-        and ``gap_ratio`` whatever this setting
-    block_tol : also require every block's imbalance ratio (``kernels.relaxation.
-        block_imbalance``: the net out-of-balance force of the block over the sum of the
-        magnitudes of its joints' forces and loads, the "local ratio" of block codes) to be at
-        most this for an increment to converge (default 0.1; 0: off, only the global ratio
-        ``tol`` counts; the S5 main job's largest ratio is 0.084, so it never binds there). The
-        global norm weighs a loose brick's imbalance against the whole model's load, so a brick
-        held by little more than its weight can stay tens of per cent out of balance and creep
-        (continued by the predictor before it left such blocks alone, ``solver.LOOSE_BLOCK``, bricks
-        left the S5 wall's plane over a few rows of a cyclic run: docs/validation.md); the
-        history column ``block_imbalance`` records every row's largest ratio, and a run warns
-        once when it passes ``solver.BLOCK_IMBALANCE_WARN``
-    max_dissipation : load-step control, off by default (0): a converged increment whose damage
-        dissipation (blocks, and joints without friction) exceeds this fraction of the external
-        work done so far is cut in two (accepted at the last allowed cut). Where many joints
-        soften at once a large step jumps across the peak; with 0.05 a single joint's peak is
-        found in 8 increments, but on the S5 wall the refined steps cost 5 x the iterations of
-        twice as many uniform ones (BENCHMARKS.md section 12). Each accepted increment's ratio
-        is the history column ``dissipation_ratio``
+    tol : residual ratio ||out-of-balance|| / ||loads + reactions|| at most this
+    block_tol : and every block's imbalance ratio (net out-of-balance force over the magnitudes
+        of its forces) at most this (0: off)
+    gap_tol : and the out-of-balance resultant along each driven axis at most this fraction of
+        the driving force (0: off; also bounds a row accepted at the floor)
+    floor_tol : an increment stopped short of tol with its ratio at or below this is accepted
+        with a warning instead of cut (0: off)
+    energy_tol : energy-balance error (of the gross external work) above which a run warns
     check_every : iterations between convergence checks
-    energy_tol : energy-balance error above which a warning is recorded; the error is
-        W_ext - E_stored - D_blocks - D_joints relative to the gross external work
-        (sum over DOFs of |f du|, which equals W_ext on monotonic paths and stays meaningful
-        when works of opposite sign cancel, as gravity and the push of a rocking block do).
-        An increment that alone moves the error by more than this names the joint points and
-        the element that dissipated most in it, or says that no few points hold the move (a few
-        such warnings per run)
-    predictor : start each increment from the previous one's displacement increment (same
-        direction), except on blocks that ended it out of balance (``solver.LOOSE_BLOCK``)
-    coarse : two-level relaxation: a Galerkin coarse correction on the blocks' affine motions
-        (:mod:`dr_masonry.coarse`) before every span of ``coarse_every`` iterations; True, False
-        or "auto" (default: on for models of at least ``COARSE_MIN_BLOCKS`` movable blocks, where
-        it saves 2-4 x the iterations before the peak, BENCHMARKS.md section 6; on a few
-        blocks it only adds work)
-    checkpoint_s : between frames, write the restart data again once this many seconds of wall
-        time have passed since the last time (0: after every increment, and after each committed
-        part of a cut increment), so that an interrupted long run loses at most about this much
-        work
-    keep_checkpoint_s : keep a copy of the restart data (``/checkpoints/NNNNNN``) at most once
-        per this many seconds of wall time (0: never), so that a long run can be continued from
-        further back (``Simulation.resume(path, increment)``), e.g. with other solver settings
-        or after a fix; each copy is as large as the checkpoint (S4 wall 1.6 MB, house 12 MB)
-    redetect : finite sliding of the joints: after every increment, contact points whose slave
-        node slid off its master quad are paired with the quad now under it, and points that slid
-        off every face carry no force until one takes them back (:mod:`dr_masonry.sliding`;
-        nothing runs while no node leaves its quad). False keeps the pairing of the reference
-        configuration (small sliding)
-    progress : show a progress bar
     """
-    damping: str = "viscous"
-    alpha: float = None
-    ring: float = 1.0
     tol: float = 1e-4
-    safety: float = 1.1
-    allow_unstable: bool = False
+    block_tol: float = 0.1
+    gap_tol: float = 0.0
+    floor_tol: float = 0.0
+    energy_tol: float = 0.01
+    check_every: int = 10
+
+
+@dataclass
+class Increments:
+    """How increments are stepped and cut.
+
+    max_iter : iteration cap of one attempt before it is cut in two
+    max_cuts : halvings of an increment before the run stops
+    stall_iter : an attempt whose ratio has not fallen 10 % below its best for this many
+        iterations, or that at its rate would not reach tol within max_iter, is cut (0: never)
+    max_dissipation : a converged increment that dissipates more than this fraction of the
+        external work so far is cut (0: off)
+    predictor : start an increment from the previous one's displacement increment
+    """
     max_iter: int = 200_000
     max_cuts: int = 4
     stall_iter: int = 10_000
-    floor_tol: float = 0.0
-    gap_tol: float = 0.0
-    block_tol: float = 0.1
     max_dissipation: float = 0.0
-    check_every: int = 10
-    energy_tol: float = 0.01
     predictor: bool = True
-    coarse: object = "auto"
-    coarse_every: int = 200
+
+
+@dataclass
+class Damping:
+    """The relaxation's damping and fictitious masses.
+
+    scheme : "viscous" (production) | "kinetic" | "local" | "fire" (flat name ``damping``)
+    alpha : the scheme's parameter (None: ``ALPHA_DEFAULT``): viscous, fraction of critical
+        damping; local, Cundall's coefficient; fire, alpha_start; kinetic, unused
+    ring : viscous: coefficient on DOFs whose velocity reverses more often than every 5
+        iterations (0 <= ring < 2; 0: off)
+    safety : fictitious masses = safety x Gershgorin row sum / 4 (stable for safety >= 1)
+    allow_unstable : accept safety < 1 (the stability stress test only)
+    """
+    scheme: str = "viscous"
+    alpha: float = None
+    ring: float = 1.0
+    safety: float = 1.1
+    allow_unstable: bool = False
+
+
+@dataclass
+class Coarse:
+    """The two-level relaxation: a Galerkin correction on the blocks' affine motions
+    (:mod:`dr_masonry.coarse`).
+
+    enabled : True, False or "auto" (on from ``COARSE_MIN_BLOCKS`` movable blocks; flat name
+        ``coarse``)
+    every : iterations between corrections (flat name ``coarse_every``)
+    """
+    enabled: object = "auto"
+    every: int = 200
+
+
+@dataclass
+class Sliding:
+    """Finite sliding of the joints.
+
+    redetect : after every increment, re-pair contact points whose slave node slid off its
+        master face (:mod:`dr_masonry.sliding`); False keeps the reference pairing
+    """
+    redetect: bool = True
+
+
+@dataclass
+class Output:
+    """Restart data and the progress bar.
+
+    checkpoint_s : between frames, write the restart data again after this many seconds of wall
+        time (0: after every increment)
+    keep_checkpoint_s : keep a copy of the restart data at most once per this many seconds
+        (0: never), to continue from further back
+    progress : show a progress bar
+    """
     checkpoint_s: float = 60.0
     keep_checkpoint_s: float = 3600.0
-    redetect: bool = True
     progress: bool = False
 
-    def __post_init__(self):
-        if not isinstance(self.damping, str) or self.damping not in DAMPING:
-            raise OptionsError(f"SolverOptions.damping={self.damping!r}: valid values are "
+
+#: the groups, by attribute name of :class:`SolverOptions`
+GROUPS = {"convergence": Convergence, "increments": Increments, "damping": Damping,
+          "coarse": Coarse, "sliding": Sliding, "output": Output}
+#: flat name -> (group, field)
+FLAT = {("damping" if (g, f.name) == ("damping", "scheme") else
+         "coarse" if (g, f.name) == ("coarse", "enabled") else
+         "coarse_every" if (g, f.name) == ("coarse", "every") else f.name): (g, f.name)
+        for g, cls in GROUPS.items() for f in fields(cls)}
+
+
+class SolverOptions:
+    """Dynamic-relaxation settings in six groups (attributes ``convergence``, ``increments``,
+    ``damping``, ``coarse``, ``sliding``, ``output``).
+
+    ``SolverOptions(tol=1e-3, max_cuts=6)`` sets fields by their flat names (:data:`FLAT`);
+    a group may also be given whole (``increments=Increments(max_iter=60_000)``). Fields may be
+    changed afterwards (``options.increments.max_iter = 60_000``): :meth:`check` runs again when
+    a run starts.
+    """
+
+    def __init__(self, **kw):
+        for g, cls in GROUPS.items():
+            # a group given whole; ``damping`` and ``coarse`` otherwise are the flat names of the
+            # scheme and the switch
+            given = kw.pop(g) if isinstance(kw.get(g), cls) else None
+            if g in kw and g not in FLAT:
+                raise OptionsError(f"SolverOptions.{g}={kw[g]!r}: must be a {cls.__name__}")
+            setattr(self, g, given if given is not None else cls())
+        for name, value in kw.items():
+            if name not in FLAT:
+                raise OptionsError(f"SolverOptions: unknown option {name!r}; valid names are "
+                                   f"{sorted(FLAT)}")
+            g, f = FLAT[name]
+            setattr(getattr(self, g), f, value)
+        self.check()
+
+    def __setattr__(self, name, value):
+        if name not in GROUPS:
+            where = f"options.{'.'.join(FLAT[name])}" if name in FLAT else "a group's field"
+            raise OptionsError(f"SolverOptions.{name}: set {where} (the fields are in groups: "
+                               f"{list(GROUPS)})")
+        super().__setattr__(name, value)
+
+    def __getattr__(self, name):   # only for names that are not attributes
+        if name in FLAT:
+            raise AttributeError(f"SolverOptions has no attribute {name!r}: it is "
+                                 f"options.{'.'.join(FLAT[name])}")
+        raise AttributeError(f"SolverOptions has no attribute {name!r}")
+
+    @classmethod
+    def defaults(cls):
+        """{flat name: default} of every field (``alpha``: None, the scheme's default)."""
+        return {name: getattr(GROUPS[g](), f) for name, (g, f) in FLAT.items()}
+
+    def as_dict(self):
+        """{flat name: value}: the options as stored in a result file and given to scenes."""
+        return {name: getattr(getattr(self, g), f) for name, (g, f) in FLAT.items()}
+
+    def replace(self, **changes):
+        """A copy with the fields ``changes`` (flat names) changed; a new ``damping`` scheme
+        without an ``alpha`` takes its own default."""
+        flat = self.as_dict()
+        if "damping" in changes and "alpha" not in changes:
+            flat["alpha"] = None
+        return SolverOptions(**{**flat, **changes})
+
+    def __repr__(self):
+        changed = {k: v for k, v in self.as_dict().items() if v != self.defaults()[k]
+                   and k != "alpha"}
+        return "SolverOptions(" + ", ".join(f"{k}={v!r}" for k, v in changed.items()) + ")"
+
+    def __eq__(self, other):
+        return isinstance(other, SolverOptions) and self.as_dict() == other.as_dict()
+
+    def check(self):
+        """Validate every field (OptionsError naming the flat name, the value and what is
+        valid) and normalise: integral counts to int, ``alpha`` None to its scheme's default."""
+        c, i, d, k, s, o = (self.convergence, self.increments, self.damping, self.coarse,
+                            self.sliding, self.output)
+        if not isinstance(d.scheme, str) or d.scheme not in DAMPING:
+            raise OptionsError(f"SolverOptions.damping={d.scheme!r}: valid values are "
                                f"{list(DAMPING)}")
-        if self.alpha is None:
-            self.alpha = {"viscous": 1.0, "local": 0.8, "kinetic": 0.0, "fire": 0.1}[self.damping]
-        for name in ("redetect", "predictor", "progress", "allow_unstable"):
-            if not isinstance(getattr(self, name), (bool, np.bool_)):
-                raise OptionsError(f"SolverOptions.{name}={getattr(self, name)!r}: must be True or "
-                                   "False")
-        if not (isinstance(self.coarse, (bool, np.bool_))
-                or isinstance(self.coarse, str) and self.coarse == "auto"):
-            raise OptionsError(f"SolverOptions.coarse={self.coarse!r}: must be True, False or "
+        if d.alpha is None:
+            d.alpha = ALPHA_DEFAULT[d.scheme]
+        for group, name, flat in ((s, "redetect", "redetect"), (i, "predictor", "predictor"),
+                                  (o, "progress", "progress"),
+                                  (d, "allow_unstable", "allow_unstable")):
+            if not isinstance(getattr(group, name), (bool, np.bool_)):
+                raise OptionsError(f"SolverOptions.{flat}={getattr(group, name)!r}: must be True "
+                                   "or False")
+        if not (isinstance(k.enabled, (bool, np.bool_))
+                or isinstance(k.enabled, str) and k.enabled == "auto"):
+            raise OptionsError(f"SolverOptions.coarse={k.enabled!r}: must be True, False or "
                                "'auto'")
-        for name, low in (("max_iter", 1), ("check_every", 1), ("coarse_every", 1),
-                          ("max_cuts", 0), ("stall_iter", 0)):
-            v = getattr(self, name)   # an integral number, as Stage takes it
+        for group, name, flat, low in ((i, "max_iter", "max_iter", 1),
+                                       (c, "check_every", "check_every", 1),
+                                       (k, "every", "coarse_every", 1),
+                                       (i, "max_cuts", "max_cuts", 0),
+                                       (i, "stall_iter", "stall_iter", 0)):
+            v = getattr(group, name)   # an integral number, as Stage takes it
             if not L.is_count(v, low):
-                raise OptionsError(f"SolverOptions.{name}={v!r}: must be an integer >= {low}")
-            setattr(self, name, int(v))
-        for name, ok, what in (
-                ("tol", L.tol_ok, f"in (0, {L.MAX_TOL}] (a relative residual)"),
-                ("safety", lambda v: v >= 1.0 or self.allow_unstable and v > 0.0,
+                raise OptionsError(f"SolverOptions.{flat}={v!r}: must be an integer >= {low}")
+            setattr(group, name, int(v))
+        for group, name, ok, what in (
+                (c, "tol", L.tol_ok, f"in (0, {L.MAX_TOL}] (a relative residual)"),
+                (d, "safety", lambda v: v >= 1.0 or d.allow_unstable and v > 0.0,
                  ">= 1 for a stable step (> 0 with allow_unstable)"),
-                ("energy_tol", lambda v: v > 0, "> 0"),
-                ("floor_tol", lambda v: v == 0.0 or v >= self.tol and L.tol_ok(v),
-                 f"0 (off) or in [tol = {self.tol}, {L.MAX_TOL}]"),
-                ("gap_tol", lambda v: 0.0 <= v < 1.0, "in [0, 1) (0: off)"),
-                ("ring", lambda v: 0.0 <= v < 2.0, "in [0, 2) (0: off)"),
-                ("max_dissipation", lambda v: v >= 0, ">= 0 (0: off)"),
-                ("block_tol", lambda v: 0.0 <= v < 1.0, "in [0, 1) (0: off)"),
-                ("checkpoint_s", lambda v: v >= 0, ">= 0 s"),
-                ("keep_checkpoint_s", lambda v: v >= 0, ">= 0 s"),
-                ("alpha", ALPHA_RANGE[self.damping][0], ALPHA_RANGE[self.damping][1])):
-            v = getattr(self, name)
+                (c, "energy_tol", lambda v: v > 0, "> 0"),
+                (c, "floor_tol", lambda v: v == 0.0 or v >= c.tol and L.tol_ok(v),
+                 f"0 (off) or in [tol = {c.tol}, {L.MAX_TOL}]"),
+                (c, "gap_tol", lambda v: 0.0 <= v < 1.0, "in [0, 1) (0: off)"),
+                (d, "ring", lambda v: 0.0 <= v < 2.0, "in [0, 2) (0: off)"),
+                (i, "max_dissipation", lambda v: v >= 0, ">= 0 (0: off)"),
+                (c, "block_tol", lambda v: 0.0 <= v < 1.0, "in [0, 1) (0: off)"),
+                (o, "checkpoint_s", lambda v: v >= 0, ">= 0 s"),
+                (o, "keep_checkpoint_s", lambda v: v >= 0, ">= 0 s"),
+                (d, "alpha", ALPHA_RANGE[d.scheme][0], ALPHA_RANGE[d.scheme][1])):
+            v = getattr(group, name)
             if not (L.is_number(v) and ok(v)):
                 raise OptionsError(f"SolverOptions.{name}={v!r}: must be a finite number {what}")

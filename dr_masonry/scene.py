@@ -5,6 +5,7 @@ import warnings
 
 import numpy as np
 
+from .options import SolverOptions
 from .params import ParameterError, check_protocol_keys, output_path, parse_overrides, with_preset
 from .results import above_tol, make_folder, open_result
 from .solver import SolverError
@@ -24,23 +25,15 @@ def scene_params(defaults, fast, argv, doc):
     return params
 
 
+#: scene parameters that are :class:`~dr_masonry.options.SolverOptions` fields of the same (flat)
+#: name: their defaults and meaning are the options' (docs/solver.md)
+OPTION_KEYS = ("tol", "damping", "coarse", "max_dissipation", "redetect", "max_iter", "max_cuts",
+               "stall_iter", "floor_tol", "gap_tol", "block_tol")
 #: the solver and output parameters of the wall and house scenes, with their defaults (a scene's
-#: ``PARAMS`` spreads them: ``dict(..., **RUN_PARAMS)``)
+#: ``PARAMS`` spreads them: ``dict(..., **RUN_PARAMS)``): the :data:`OPTION_KEYS` with the
+#: options' defaults, and
 RUN_PARAMS = dict(
-    tol=1e-4,               # relative residual tolerance of an increment (SolverOptions)
-    damping="viscous",      # viscous | kinetic | local | fire (SolverOptions.damping)
-    coarse=True,            # two-level relaxation (SolverOptions.coarse)
-    max_dissipation=0.0,    # load-step control (SolverOptions.max_dissipation; 0: off)
-    redetect=True,          # finite sliding of the joints (SolverOptions.redetect)
-    max_iter=200_000,       # iteration cap of an increment before it is cut (SolverOptions)
-    max_cuts=4,             # halvings of an increment before the run stops (SolverOptions)
-    stall_iter=10_000,      # iterations without 10 % progress before an attempt is cut
-                            # (SolverOptions; 0: never)
-    floor_tol=0.0,          # accept a stalled increment at this residual (SolverOptions; 0: off)
-    gap_tol=0.0,            # converge (and accept at the floor) only with the out-of-balance
-                            # resultant at most this fraction of the driving force
-                            # (SolverOptions; 0: off)
-    block_tol=0.1,          # every block balanced to this fraction of its forces (SolverOptions)
+    {k: v for k, v in SolverOptions.defaults().items() if k in OPTION_KEYS},
     frames=5,               # write a field frame every this many increments (and at each
                             # turning point of a cyclic path)
     resume=False,           # continue the run stored in out.h5 from its last checkpoint
@@ -54,9 +47,6 @@ RUN_PARAMS = dict(
                             # the monotonic run on the cyclic one), or a CSV of the curve's two
                             # columns in its plotted units (measured or published points)
 )
-#: scene parameters that are :class:`SolverOptions` fields of the same name
-OPTION_KEYS = ("tol", "damping", "coarse", "max_dissipation", "redetect", "max_iter", "max_cuts",
-               "stall_iter", "floor_tol", "gap_tol", "block_tol")
 #: parameters that may differ when a run is continued: how it is solved and written, not what
 SOLVER_KEYS = {"resume", "resume_from", "replot", "maps", "compare", "progress", "out", "h5",
                "frames", "solver", *OPTION_KEYS}
@@ -69,12 +59,23 @@ def choice(params, key, options):
     return params[key]
 
 
+#: the scene parameter ``coarse`` as written on a command line (the option takes True, False or
+#: "auto")
+COARSE_WORDS = {"true": True, "on": True, "yes": True, "1": True, "false": False, "off": False,
+                "no": False, "0": False, "auto": "auto"}
+
+
 def solver_options(params):
     """The :class:`SolverOptions` of a scene: its ``OPTION_KEYS`` parameters (those it has) and
     the progress bar."""
-    from .options import SolverOptions
-    return SolverOptions(**{k: params[k] for k in OPTION_KEYS if k in params},
-                         progress=params.get("progress", False))
+    given = {k: params[k] for k in OPTION_KEYS if k in params}
+    if isinstance(given.get("coarse"), str):
+        word = given["coarse"].strip().lower()
+        if word not in COARSE_WORDS:
+            raise ParameterError(f"parameter coarse={given['coarse']!r}: valid values are "
+                                 f"true, false, auto")
+        given["coarse"] = COARSE_WORDS[word]
+    return SolverOptions(**given, progress=params.get("progress", False))
 
 
 def with_penalty(law, factor):
@@ -195,7 +196,7 @@ def equilibrium_text(force, reaction, at_floor, unit=kN, unit_name="kN"):
 def at_floor(sim, hist, rows):
     """Bool mask of the history rows ``rows`` accepted above the solver's tolerance (at the
     residual floor, ``SolverOptions.floor_tol``)."""
-    return above_tol(np.asarray(hist["residual"])[rows], sim.options.tol)
+    return above_tol(np.asarray(hist["residual"])[rows], sim.options.convergence.tol)
 
 
 def solver_summary(hist, rows):

@@ -188,7 +188,7 @@ class Sliding:
 
     def apply(self, master, xi, gap0, law, area, blocks):
         """Install a contact set of the same points (arrays as in :class:`ContactSet`): the
-        dissipation of points going off or coming back, then ``sim._contacts_changed``."""
+        dissipation of points going off or coming back, then ``solver.arrays.contacts_changed``."""
         cont = self.sim.cont
         off = (area == 0.0) & (cont.area > 0.0)
         back = (area > 0.0) & (cont.area == 0.0)
@@ -200,7 +200,8 @@ class Sliding:
                                                                               law, area)
         self.blocks[:] = blocks
         self.changed = True
-        self.sim._contacts_changed()
+        from .solver.arrays import contacts_changed
+        contacts_changed(self.sim)
 
     def state(self):
         """Arrays for a checkpoint (restored by :meth:`restore`)."""

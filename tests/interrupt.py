@@ -1,13 +1,15 @@
 """Test helper: simulate an interrupted run (Ctrl-C) at a chosen committed increment."""
-from dr_masonry.solver import Simulation
+from dr_masonry.solver import increments
+
+#: the commit of an accepted increment, as the increment loop calls it
+COMMIT = increments.commit
 
 
 def interrupt_after(monkeypatch, increment):
-    """Make runs raise KeyboardInterrupt once ``increment`` has been committed (an interrupt)."""
-    commit = Simulation._commit
-
-    def stop(self, *args):
-        commit(self, *args)
-        if self.increment == increment:
+    """Make runs raise KeyboardInterrupt once ``increment`` has been committed (an interrupt);
+    ``monkeypatch.setattr(increments, "commit", COMMIT)`` undoes it."""
+    def stop(sim, *args):
+        COMMIT(sim, *args)
+        if sim.increment == increment:
             raise KeyboardInterrupt
-    monkeypatch.setattr(Simulation, "_commit", stop)
+    monkeypatch.setattr(increments, "commit", stop)

@@ -7,6 +7,7 @@ from dr_masonry import (Gravity, JointLaw, Load, Model, PlasticDamage, Simulatio
                         SolverOptions, Stage)
 from dr_masonry.coarse import BlockCoarse, affine_stiffness, affine_t, rigid_t
 from dr_masonry.kernels import relaxation as R
+from dr_masonry.solver import controls
 
 import linear_reference as LR
 
@@ -69,8 +70,8 @@ def _loaded(kc, coarse):
     sim = Simulation(_column(30, kc), SolverOptions(tol=1e-5, coarse=coarse))
     sim.build()
     ctl = Load(pattern=Gravity(), to=1000.0)
-    sim._apply(ctl, 1000.0)
-    sim._assemble_loads(None)
+    controls.apply(sim, ctl, 1000.0)
+    controls.assemble_loads(sim, None)
     return sim, Stage("g", 1, [ctl])
 
 

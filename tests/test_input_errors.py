@@ -13,7 +13,7 @@ from dr_masonry import (BodyForce, Displacement, Force, Gravity, JointLaw, Load,
 from dr_masonry.cli import main
 from dr_masonry.loading import Combined, LoadingError, PointLoad, Pressure, cyclic_path
 from dr_masonry.model import ModelError
-from dr_masonry.options import OptionsError
+from dr_masonry.options import FLAT, OptionsError
 from dr_masonry.protocols import S5
 from dr_masonry.results import ResultsError, make_folder, open_result
 from test_results import write_fake_result
@@ -82,8 +82,8 @@ def test_postprocessing_and_material_queries_name_bad_arguments():
 
 def test_integer_options_take_integral_numbers_as_stages_do():
     o = SolverOptions(max_iter=2e5, max_cuts=np.int64(6), stall_iter=0.0)
-    assert (o.max_iter, o.max_cuts, o.stall_iter) == (200_000, 6, 0)
-    assert all(type(v) is int for v in (o.max_iter, o.max_cuts, o.stall_iter))
+    assert (o.increments.max_iter, o.increments.max_cuts, o.increments.stall_iter) == (200_000, 6, 0)
+    assert all(type(v) is int for v in (o.increments.max_iter, o.increments.max_cuts, o.increments.stall_iter))
     assert Stage("s", 2e1).increments == 20
 
 
@@ -183,16 +183,18 @@ def test_controls_on_one_dof_and_bad_pressure_quads_are_refused_at_run():
 
 def test_fields_changed_after_creation_are_checked_at_run():
     """Options, stages, controls and patterns are checked when made; a field changed afterwards
-    (``sim.options.max_iter = 2.5``) is checked again when the run starts: it had hung in the
+    (``sim.options.increments.max_iter = 2.5``) is checked again when the run starts: it had hung in the
     relaxation (2.5), raised a Numba TypingError (alpha 'x'), a KeyError (damping 'viscus'), a
-    ZeroDivisionError (frames 0) or an AttributeError (a string among the controls)."""
+    ZeroDivisionError (frames 0) or an AttributeError (a string among the controls). A field
+    set by its flat name on the options (not in its group) is refused, not silently kept."""
     def run(change_options=None, change_stage=None):
         m, sim, base, top = _sim()
         rp = sim.rigid_point("top", blocks=[top])
         stage = Stage("s", 1, [Force(target=rp, dof="z", to=-10.0),
                                Load(pattern=Gravity(), to=1.0)])
         for k, v in (change_options or {}).items():
-            setattr(sim.options, k, v)
+            group, field = FLAT[k]
+            setattr(getattr(sim.options, group), field, v)
         if change_stage:
             change_stage(stage)
         sim.run([stage])
@@ -202,6 +204,8 @@ def test_fields_changed_after_creation_are_checked_at_run():
                         (dict(tol=-1.0), r"tol=-1.0")):
         with pytest.raises(OptionsError, match=msg):
             run(change_options=change)
+    with pytest.raises(OptionsError, match=r"set options.increments.max_iter"):
+        SolverOptions().max_iter = 10
     for change, msg in ((lambda st: setattr(st, "frames", 0), r"frames=0 must be an integer"),
                         (lambda st: setattr(st.controls[0], "to", np.nan), r"to=nan"),
                         (lambda st: setattr(st.controls[1].pattern, "g", np.nan), r"g=nan"),

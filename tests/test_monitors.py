@@ -7,7 +7,7 @@ from dr_masonry import Displacement, Gravity, JointLaw, Load, Model, PlasticDama
 from dr_masonry import Simulation, SolverOptions, Stage
 from dr_masonry.kernels import relaxation as R
 from dr_masonry.results import open_result
-import dr_masonry.solver as S
+from dr_masonry.solver import relaxing as S
 
 MAT = PlasticDamage.elastic(10e9, 0.2, 2000.0)
 
@@ -30,8 +30,8 @@ def test_monitor_sees_every_call_of_every_row(monkeypatch):
     monkeypatch.setattr(S, "CALL_ITERATIONS", 20)   # rows of 40-90 iterations: several calls
     sim, stages = setup()
     calls = []
-    sim.monitors.append(lambda s, info, done: calls.append(
-        (s.increment + 1, done, int(info[R.I_STATUS]), float(info[R.I_RESID]))))
+    sim.monitors.append(lambda s, out, done: calls.append(
+        (s.increment + 1, done, out.status, out.residual)))
     hist = sim.run(stages)
     assert hist["cut_iterations"].sum() == 0
     for row, iters in zip(hist["increment"].astype(int), hist["iterations"].astype(int)):
@@ -51,7 +51,7 @@ def test_a_monitor_stops_the_run_and_the_rows_so_far_stay(tmp_path):
     class Enough(Exception):
         pass
 
-    def stop_in_row_3(s, info, done):
+    def stop_in_row_3(s, out, done):
         if s.increment + 1 == 3:
             raise Enough
 

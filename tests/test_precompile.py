@@ -68,7 +68,7 @@ def test_a_failing_worker_is_reported_and_the_run_goes_on(monkeypatch):
     with warnings.catch_warnings():
         warnings.simplefilter("error", RuntimeWarning)
         sim.run(gravity())
-    assert sim.history["increment"] == [1] and sim.history["residual"][0] <= sim.options.tol
+    assert sim.history["increment"] == [1] and sim.history["residual"][0] <= sim.options.convergence.tol
 
 
 def test_no_worker_without_compilation():

@@ -1,15 +1,17 @@
 """Verification of the solver on the small scenes S1-S3 against closed forms (coarse variants)."""
 import warnings
-from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from dr_masonry import JointLaw, PlasticDamage, SolverOptions
 from dr_masonry.cases import couplet, squat_wall, triplet, wallet
+from dr_masonry.kernels import relaxation as R
 from dr_masonry.loading import LoadingError
 from dr_masonry.solver import SolverError
-from interrupt import interrupt_after
+from dr_masonry.solver import increments
+
+from interrupt import COMMIT, interrupt_after
 
 
 def test_couplet_peak_and_energy(tmp_path):
@@ -70,9 +72,9 @@ def test_unsafe_step_is_refused():
     """safety < 1 only with allow_unstable (the stress test), also when set after creation."""
     with pytest.raises(ValueError, match="safety"):
         SolverOptions(safety=0.5)
-    assert SolverOptions(safety=0.5, allow_unstable=True).safety == 0.5
+    assert SolverOptions(safety=0.5, allow_unstable=True).damping.safety == 0.5
     sim, stages = couplet.build(dict(couplet.PARAMS, h5=None))
-    sim.options.safety = 0.5
+    sim.options.damping.safety = 0.5
     with pytest.raises(ValueError, match=r"SolverOptions.safety=0.5: must be a finite number >= 1"):
         sim.run(stages)
 
@@ -86,13 +88,13 @@ def test_unstable_run_stops_with_diagnosis(tmp_path):
     from dr_masonry.results import open_result
     params = dict(couplet.PARAMS, h5=str(tmp_path / "u.h5"))
     sim, stages = couplet.build(params)
-    sim.options = replace(sim.options, safety=0.05, allow_unstable=True)
+    sim.options = sim.options.replace(safety=0.05, allow_unstable=True)
     with pytest.raises(SolverError, match=r"increment 1 of stage 'tension': unstable time step "
                                           r"after (\d+) iterations.*\(omega dt\)\^2 = .* raise "
                                           r"SolverOptions.safety \(now 0.05\)") as err:
         sim.run(stages)
     iters = int(re.search(r"after (\d+) iterations", str(err.value)).group(1))
-    assert iters < 1000 < sim.options.max_iter
+    assert iters < 1000 < sim.options.increments.max_iter
     sim.close()
     r = open_result(str(tmp_path / "u.h5"))
     assert r.n_history == 0
@@ -106,7 +108,7 @@ def test_unconverged_increment_is_cut_and_accounted(monkeypatch):
     cuts left the run stops naming the increment and the cap."""
     law = JointLaw.reference()
     sim, stages = couplet.build(dict(couplet.PARAMS, h5=None))
-    sim.options.max_iter = 35       # several couplet increments need 40 iterations
+    sim.options.increments.max_iter = 35       # several couplet increments need 40 iterations
     hist = sim.run(stages)
     n = couplet.PARAMS["increments"]
     extra = hist["iterations"].size - n
@@ -120,26 +122,25 @@ def test_unconverged_increment_is_cut_and_accounted(monkeypatch):
     # a relaxation that reports a stall whenever the rule is on is cut down to the last allowed
     # depth, where the rule is off (each increment: 3 stalled attempts booked on 2 rows, then
     # 4 quarters)
-    import dr_masonry.solver as S
-    real = S.R.relax
+    from dr_masonry.solver import relaxing
+    real = relaxing.relax_increment
 
-    def stalling(*args):
-        real(*args)
-        if args[-3] > 0:                       # stall_iter
-            args[-1][S.R.I_STATUS] = S.R.ST_STALLED
+    def stalling(sim, ctrl, pc, tol, max_iter, stall):
+        out = real(sim, ctrl, pc, tol, max_iter, stall)
+        return out._replace(status=R.ST_STALLED) if stall > 0 else out
 
     sim, stages = couplet.build(dict(couplet.PARAMS, h5=None))
-    sim.options.max_cuts, sim.options.coarse = 2, False
-    monkeypatch.setattr(S.R, "relax", stalling)
+    sim.options.increments.max_cuts, sim.options.coarse.enabled = 2, False
+    monkeypatch.setattr(increments, "relax_increment", stalling)
     hist = sim.run(stages)
-    monkeypatch.setattr(S.R, "relax", real)
+    monkeypatch.setattr(increments, "relax_increment", real)
     assert hist["iterations"].size == 4 * n
     assert np.count_nonzero(hist["cut_iterations"]) == 2 * n
     assert hist["platen.uz"][-1] == pytest.approx(couplet.PARAMS["u_max"], rel=1e-9)
     stress = hist["platen.fz"] / (couplet.L * couplet.T)
     assert stress.max() == pytest.approx(law.ft, rel=0.01)
     sim, stages = couplet.build(dict(couplet.PARAMS, h5=None))
-    sim.options.max_iter, sim.options.max_cuts = 35, 0
+    sim.options.increments.max_iter, sim.options.increments.max_cuts = 35, 0
     with pytest.raises(SolverError, match=r"increment \d+ of stage 'tension' did not converge in "
                                           r"35 iterations after 0 cuts .*resume=true"):
         sim.run(stages)
@@ -151,19 +152,21 @@ def test_floor_tol_accepts_an_increment_short_of_tol():
     it is cut as before (no cuts left: the run stops)."""
     from dr_masonry import SolverOptions
     sim, stages = couplet.build(dict(couplet.PARAMS, h5=None))
-    sim.options.max_iter, sim.options.max_cuts, sim.options.coarse = 35, 0, False
-    sim.options.floor_tol = 0.1   # the largest taken (7 rows stop at 2e-4..7e-4)
+    inc = sim.options.increments
+    inc.max_iter, inc.max_cuts, sim.options.coarse.enabled = 35, 0, False
+    sim.options.convergence.floor_tol = 0.1   # the largest taken (7 rows stop at 2e-4..7e-4)
     with pytest.warns(RuntimeWarning, match=r"accepted at residual ratio .* floor_tol 1.0e-01"):
         hist = sim.run(stages)
     n = couplet.PARAMS["increments"]
     assert hist["iterations"].size == n and not hist["cut_iterations"].any()
-    assert np.all(hist["residual"] <= 0.1) and np.any(hist["residual"] > sim.options.tol)
-    short = hist["residual"] > sim.options.tol
+    assert np.all(hist["residual"] <= 0.1) and np.any(hist["residual"] > sim.options.convergence.tol)
+    short = hist["residual"] > sim.options.convergence.tol
     assert np.all(hist["iterations"][short] == 35)
     # a floor below the ratios reached: the first short increment stops the run as before
     sim, stages = couplet.build(dict(couplet.PARAMS, h5=None))
-    sim.options.max_iter, sim.options.max_cuts, sim.options.coarse = 35, 0, False
-    sim.options.floor_tol = 1e-4 * 1.0001
+    inc = sim.options.increments
+    inc.max_iter, inc.max_cuts, sim.options.coarse.enabled = 35, 0, False
+    sim.options.convergence.floor_tol = 1e-4 * 1.0001
     with pytest.raises(SolverError, match="did not converge in 35 iterations"):
         sim.run(stages)
     for bad in (1e-5, float("nan"), -1.0):
@@ -230,7 +233,7 @@ def test_dissipation_control_refines_the_peak():
     n, peaks = 8, {}
     for md in (0.0, 0.05):
         sim, stages = couplet.build(dict(couplet.PARAMS, h5=None, increments=n, nx=2, ny=1, nz=1))
-        sim.options.max_dissipation = md
+        sim.options.increments.max_dissipation = md
         hist = sim.run(stages)
         peaks[md] = hist["platen.fz"].max() / (couplet.L * couplet.T)
     assert peaks[0.0] < 0.92 * law.ft
@@ -243,7 +246,7 @@ def test_dissipation_control_refines_the_peak():
     assert over.any() and hist["iterations"].size > n
     k = np.log2(whole[over] / step[over])
     assert np.allclose(k, np.round(k), atol=1e-6) and np.all(k > 0.5)
-    assert np.all(k < sim.options.max_cuts + 0.5)
+    assert np.all(k < sim.options.increments.max_cuts + 0.5)
     assert hist["cut_iterations"].sum() > 0     # the rejected attempts are booked
 
 
@@ -252,12 +255,11 @@ def test_checkpoint_inside_a_cut_increment(tmp_path, monkeypatch):
     interrupted between two parts of S1's cut second increment resumes from the first part (no
     row lost or repeated) and ends where the uninterrupted run ends, with the same peak."""
     from dr_masonry.results import open_result
-    from dr_masonry.solver import Simulation
 
     def run(h5, resume=False):
         sim, stages = couplet.build(dict(couplet.PARAMS, h5=h5, increments=8, nx=2, ny=1, nz=1))
-        sim.options.max_dissipation = 0.05      # cuts the increments around the peak
-        sim.options.checkpoint_s = 0.0
+        sim.options.increments.max_dissipation = 0.05      # cuts the increments around the peak
+        sim.options.output.checkpoint_s = 0.0
         if resume:
             sim.resume(h5)
         hist = sim.run(stages)
@@ -269,11 +271,10 @@ def test_checkpoint_inside_a_cut_increment(tmp_path, monkeypatch):
     path = couplet.PARAMS["u_max"] * (np.arange(9) / 8) ** 3
     assert path[1] < whole["platen.uz"][1] < whole["platen.uz"][2] < path[2]
     h5 = str(tmp_path / "cut.h5")
-    commit = Simulation._commit
     interrupt_after(monkeypatch, 3)
     with pytest.raises(KeyboardInterrupt):
         run(h5)
-    monkeypatch.setattr(Simulation, "_commit", commit)
+    monkeypatch.setattr(increments, "commit", COMMIT)
     assert open_result(h5).checkpoint()[0] == 2
     hist = run(h5, resume=True)
     assert np.array_equal(hist["increment"], np.arange(1, hist["increment"].size + 1))
@@ -305,7 +306,7 @@ def test_runaway_reference_point_and_inverted_element_are_named():
     from dr_masonry import Force, Stage
     from test_damping import _loaded_column
     sim, rp = _loaded_column()
-    sim.options.damping = "viscous"
+    sim.options.damping.scheme = "viscous"
     with pytest.raises(SolverError, match=r"run-away displacement .* at reference point 'tip' "):
         sim.run([Stage("throw", 1, [Force(target=rp, dof="x", to=1e12)])])
     sim, rp = _loaded_column()
@@ -358,7 +359,7 @@ def test_restart_continues_a_run(tmp_path, old_states):
 def test_energy_warning_when_balance_fails(monkeypatch):
     """The audit says so when the balance error leaves its bound (forced by a tiny bound)."""
     sim, stages = couplet.build(dict(couplet.PARAMS, increments=20, h5=None))
-    sim.options.energy_tol = 1e-9
+    sim.options.convergence.energy_tol = 1e-9
     with pytest.warns(RuntimeWarning, match="energy balance error"):
         sim.run(stages)
 

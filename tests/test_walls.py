@@ -4,6 +4,7 @@ The tiny wall is 4 bricks (0.88 m) long, 10 courses (0.81 m) high, one hexahedro
 """
 import math
 import os
+import shutil
 
 import numpy as np
 import pytest
@@ -16,30 +17,33 @@ from dr_masonry.postprocess import PostprocessError, cycle_bounds, energy_per_cy
 from dr_masonry.protocols import S4, S5, S6, S7
 from dr_masonry.results import open_result, pack
 from dr_masonry.viz.plots import crack_map
-from interrupt import interrupt_after
+from dr_masonry.solver import increments
+
+import linear_reference as LR
+from conftest import rocking_shear
+from interrupt import COMMIT, interrupt_after
 
 L, T, NC, HC = 0.88, 0.102, 10, 0.081
 H = NC * HC
 A = L * T
 G = 9.81
 LAW = JointLaw.reference()
-EB, NUB, RHO = 4800e6, 0.17, 1800.0     # brick E (Pa), Poisson, density (kg/m^3), MODEL.md sec. 4
+RHO = 1800.0     # brick density, kg/m^3 (MODEL.md sec. 4)
 
 
 def tiny(module, **kw):
     return dict(module.PARAMS, **squat_wall.FAST, h5=None, **kw)
 
 
-def stiffness(bc):
-    """Timoshenko stiffness (N/m) of the wall as a homogeneous beam, bricks and bed joints in
-    series: NC courses of bricks and NC + 1 bed joints (base and beam included), compressed
-    (normal stiffness kc_pen) and in elastic shear (kss); shear factor 5/6."""
-    n = NC + 1
-    ev = H / (H / EB + n / LAW.kc_pen)
-    gv = H / (H / (EB / (2 * (1 + NUB))) + n / LAW.kss)
-    inertia = T * L ** 3 / 12
-    bend = H ** 3 / ((3 if bc == "cantilever" else 12) * ev * inertia)
-    return 1.0 / (bend + H / (5 / 6 * gv * A))
+def linear_stiffness(sim, held):
+    """Stiffness (N/m) of the loading beam's x DOF with its DOFs ``held`` (0..5: x, y, z, rx, ry,
+    rz) at zero, from the direct solve of the same mesh (tests/linear_reference.py): the bed
+    joints, all compressed by the pre-compression, at their compression penalty kc_pen, the head
+    joints at knn (at kc_pen too the stiffness rises by 0.07 % cantilever, 0.15 % clamped)."""
+    m = sim.model
+    fixed = np.repeat(m.block_fixed[m.node_block][:, None], 3, axis=1)   # the foundation
+    bed = np.abs(LR.contact_normals(m)[:, 2]) > 0.9
+    return LR.rigid_point_stiffness(m, fixed, sim.beam.nodes, sim.beam.position, 0, held, bed)
 
 
 @pytest.fixture(scope="module")
@@ -111,13 +115,15 @@ def test_squat_vertical_reaction(squat):
 
 
 def test_squat_initial_stiffness(squat):
-    """First push increment against the Timoshenko closed form. Tolerance 25 %: the homogenised
-    beam ignores the head joints (softer) and the end constraints of a wall with H/L = 0.9 and a
-    coarse hexahedral mesh (stiffer); ignoring the joints would be 2.7 times stiffer."""
+    """The secant stiffness of the first three push rows (0.018 to 0.094 mm, elastic) against the
+    linear solve of the same mesh, 34.7 MN/m. Measured 1.4 % under it at the first row, within
+    0.6 % at the next two: the first step is so small that the force left unbalanced at tol 1e-4
+    (of the 27 kN pre-compression) is 1 % of its 0.6 kN. A Timoshenko beam of bricks and bed
+    joints in series is 9 % softer (it ignores the end constraints of a wall with H/L = 0.9)."""
     sim, hist, push = squat
-    i = np.nonzero(push)[0][0]
-    k = hist["beam.fx"][i] / hist["beam.ux"][i]
-    assert k == pytest.approx(stiffness("cantilever"), rel=0.25)
+    rows = np.nonzero(push)[0][:3]
+    k = hist["beam.fx"][rows] / hist["beam.ux"][rows]
+    np.testing.assert_allclose(k, linear_stiffness(sim, held=(1, 3, 5)), rtol=0.02)
 
 
 def test_squat_capacity_bounds(squat):
@@ -129,9 +135,8 @@ def test_squat_capacity_bounds(squat):
     n_base = n_top + RHO * G * A * H
     v = np.abs(hist["beam.fx"][push])
     slide = LAW.c * A + max(LAW.tan_phi, LAW.mu) * n_top
-    rock = (n_base * L / 2 + LAW.ft * T * L ** 2 / 2) / H
-    assert v.max() < slide and v.max() < rock
-    assert v.max() > 0.8 * n_base * L / 2 / H
+    assert v.max() < slide and v.max() < rocking_shear(n_base, L, T, H, LAW.ft)
+    assert v.max() > 0.8 * rocking_shear(n_base, L, T, H)
     assert hist["max_joint_damage"][-1] > 0.9       # the base joint has opened
 
 
@@ -142,17 +147,17 @@ def test_squat_energy_balance(squat):
 
 def test_slender_cyclic_reversal(slender_cyclic):
     """Cyclic run through load reversals in one go: the beam follows the protocol, the base
-    shear changes sign with the displacement, the double-clamped stiffness matches the closed
-    form (25 %, see above), the energy balance holds."""
+    shear changes sign with the displacement, the double-clamped stiffness of the first row
+    (0.2 mm) is the linear solve's, 42.1 MN/m (measured 0.3 % above), the energy balance holds."""
     sim, hist, push = slender_cyclic
     u, v = hist["beam.ux"][push], hist["beam.fx"][push]
     np.testing.assert_allclose(u, S4.path(H, step=0.4e-3, n_amplitudes=2), atol=1e-12)
     assert u.min() < 0 < u.max()
     big = np.abs(u) > 0.5 * np.abs(u).max()
     assert np.all(np.sign(v[big]) == np.sign(u[big]))
-    assert v[0] / u[0] == pytest.approx(stiffness("double_clamped"), rel=0.25)
+    assert v[0] / u[0] == pytest.approx(linear_stiffness(sim, held=(1, 3, 4, 5)), rel=0.01)
     n_base = 0.52e6 * A + RHO * G * A * H
-    assert np.abs(v).max() < 2 * (n_base * L / 2 + LAW.ft * T * L ** 2 / 2) / H
+    assert np.abs(v).max() < 2 * rocking_shear(n_base, L, T, H, LAW.ft)   # both ends rock
     assert np.all(np.abs(hist["balance_error"]) < 0.01)
     assert np.all(np.abs(hist["beam.ury"]) < 1e-12)   # rotation held
 
@@ -401,14 +406,14 @@ def test_interrupted_run_resumes(tmp_path, monkeypatch, squat):
     caps are not. Continued from a packed copy (``dr-masonry pack``: compressed, one frame; a
     run carried to another machine) it gives the same rows, bit for bit."""
     from dr_masonry.cli import main
+    from dr_masonry import SolverError
     from dr_masonry.solver import Simulation
     _, whole, _ = squat
     params = dict(tiny(squat_wall), h5=str(tmp_path / "s5.h5"), frames=1)
-    commit = Simulation._commit
     interrupt_after(monkeypatch, 9)
     with pytest.raises(KeyboardInterrupt):
         squat_wall.run(params)
-    monkeypatch.setattr(Simulation, "_commit", commit)
+    monkeypatch.setattr(increments, "commit", COMMIT)
     assert open_result(params["h5"]).n_history == 9
     assert open_result(params["h5"]).checkpoint()[0] == 8   # frames=1: the last whole increment
     with pytest.raises(ParameterError, match="sigma="):
@@ -416,6 +421,8 @@ def test_interrupted_run_resumes(tmp_path, monkeypatch, squat):
     with pytest.raises(ParameterError, match="resume_from=8 continues a stored run: add resume"):
         squat_wall.run(dict(params, resume_from=8))
     assert open_result(params["h5"]).n_history == 9          # the file is left as it was
+    stuck = str(tmp_path / "stuck.h5")   # the stopped run, to continue with other caps
+    shutil.copy(params["h5"], stuck)
     copy = str(tmp_path / "copy.h5")
     assert main(["pack", params["h5"], copy, "--frames", "4"]) == 0
     assert open_result(copy).frame_ids == [4]
@@ -427,7 +434,10 @@ def test_interrupted_run_resumes(tmp_path, monkeypatch, squat):
                                               max_cuts=5))
         sim.close()
         hists.append(hist)
-    assert (sim.options.max_iter, sim.options.max_cuts) == (150_000, 5)
+    # the changed caps reach the continued run: at 20 iterations and no cut it stops at once
+    with pytest.raises(SolverError, match="increment 9 of stage 'push' did not converge in 20 "
+                                          "iterations after 0 cuts"):
+        squat_wall.run(dict(params, h5=stuck, resume=True, max_iter=20, max_cuts=0))
     hist = hists[0]
     assert np.array_equal(hist["increment"], whole["increment"])
     assert np.allclose(hist["beam.fx"], whole["beam.fx"], rtol=1e-3, atol=1.0)
@@ -478,35 +488,36 @@ def test_resume_after_the_last_part_of_a_cut_increment(tmp_path, monkeypatch):
     (the checkpoint of that part, "inside" the increment, is the last one on disk) resumes
     with the next increment: no repeated row at the same target (S7 cyclic rows 55-56 and
     64-65 repeated theirs)."""
-    from dr_masonry.solver import Simulation, SolverOptions
-    init, increment, write = (SolverOptions.__init__, Simulation._increment,
-                              Simulation._write_checkpoint)
+    from dr_masonry import SolverOptions
+    from dr_masonry.solver import checkpoint
+    init, increment, write = (SolverOptions.__init__, increments.increment,
+                              checkpoint.Checkpoints.write)
 
     def every_part(self, *a, **k):
         init(self, *a, **k)
-        self.checkpoint_s = 0.0
+        self.output.checkpoint_s = 0.0
     params = dict(tiny(squat_wall), increments=6, frames=100, max_iter=500, max_cuts=8)
     _, whole, _ = squat_wall.run(dict(params, h5=str(tmp_path / "whole.h5")))
     assert whole["cut_iterations"].sum() > 0          # increments were cut
     monkeypatch.setattr(SolverOptions, "__init__", every_part)
     stopped, last_inside = [], [False]
 
-    def note_checkpoint(self, inside=False):
-        write(self, inside)
+    def note_checkpoint(self, sim, inside=False):
+        write(self, sim, inside)
         last_inside[0] = inside
 
-    def stop_after_a_cut_one(self, stage, targets, goal, indirect, depth, parent_diss=None):
-        increment(self, stage, targets, goal, indirect, depth, parent_diss)
+    def stop_after_a_cut_one(sim, stage, targets, goal, indirect, depth, parent_diss=None):
+        increment(sim, stage, targets, goal, indirect, depth, parent_diss)
         if depth == 0 and last_inside[0] and not stopped:
-            stopped.append(self.increment)
+            stopped.append(sim.increment)
             raise KeyboardInterrupt
-    monkeypatch.setattr(Simulation, "_write_checkpoint", note_checkpoint)
-    monkeypatch.setattr(Simulation, "_increment", stop_after_a_cut_one)
+    monkeypatch.setattr(checkpoint.Checkpoints, "write", note_checkpoint)
+    monkeypatch.setattr(increments, "increment", stop_after_a_cut_one)
     h5 = str(tmp_path / "s5.h5")
     with pytest.raises(KeyboardInterrupt):
         squat_wall.run(dict(params, h5=h5))
     assert open_result(h5).checkpoint()[2]["inside"]   # the checkpoint of the last part
-    monkeypatch.setattr(Simulation, "_increment", increment)
+    monkeypatch.setattr(increments, "increment", increment)
     sim, hist, _ = squat_wall.run(dict(params, h5=h5, resume=True))
     sim.close()
     assert stopped and np.array_equal(hist["beam.ux"], whole["beam.ux"])
@@ -516,12 +527,12 @@ def test_resume_after_the_last_part_of_a_cut_increment(tmp_path, monkeypatch):
 def test_checkpoint_between_frames(tmp_path, monkeypatch):
     """With checkpoint_s = 0 the restart data follow every increment even when frames are
     sparse: an interrupted run loses no row and resumes from an increment without a frame."""
-    from dr_masonry.solver import Simulation, SolverOptions
-    init, commit = SolverOptions.__init__, Simulation._commit
+    from dr_masonry import SolverOptions
+    init = SolverOptions.__init__
 
     def every_increment(self, *a, **k):
         init(self, *a, **k)
-        self.checkpoint_s = 0.0
+        self.output.checkpoint_s = 0.0
     monkeypatch.setattr(SolverOptions, "__init__", every_increment)
     interrupt_after(monkeypatch, 7)
     params = dict(tiny(squat_wall), h5=str(tmp_path / "s5.h5"), frames=100, increments=6)
@@ -533,7 +544,7 @@ def test_checkpoint_between_frames(tmp_path, monkeypatch):
     assert r.frame_increment("checkpoint") == 6
     png = crack_map(r, "checkpoint", str(tmp_path / "ck.png"), threshold=0.0)
     assert os.path.getsize(png) > 0
-    monkeypatch.setattr(Simulation, "_commit", commit)
+    monkeypatch.setattr(increments, "commit", COMMIT)
     sim, hist, _ = squat_wall.run(dict(params, resume=True))
     sim.close()
     sim, whole, _ = squat_wall.run(dict(params, h5=str(tmp_path / "whole.h5")))

@@ -22,7 +22,7 @@ def pack(src, dst, frames=()):
     compressed (gzip with byte shuffling; the history columns stay resizable), and of the frames
     only those of the increments in ``frames`` (``"all"``: every one); the checkpoints kept for a
     restart further back are left out. ``resume=true`` with ``out`` naming the copy continues the
-    run from it as from ``src``: the way a run longer than one machine's session is carried to
+    run from it as from ``src``: the way a run longer than one machine allows is carried to
     the next machine (``docs/file_format.md``, "Packed copies"). ``dst`` is written to
     ``dst + ".part"`` and renamed when complete. Returns (bytes of ``src``, bytes of ``dst``).
     """

@@ -78,7 +78,7 @@ def code_version():
     """Installed version of dr_masonry ("unknown" when it is not installed), with the git
     revision of the source tree when it runs from a checkout of its own repository (an editable
     install): "0.1.0+g5e9e6a8", "+g5e9e6a8.dirty" with uncommitted changes. A run continued over
-    several sessions records each restart's code this way (``/config`` attribute ``restarts``)."""
+    several restarts records each restart's code this way (``/config`` attribute ``restarts``)."""
     try:
         version = metadata.version("dr_masonry")
     except metadata.PackageNotFoundError:

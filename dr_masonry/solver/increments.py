@@ -1,0 +1,134 @@
+"""The increment loop: the increments of a stage, each relaxed to rest and committed, or cut in
+two and retried, with the predictor that starts an increment from the previous one's motion."""
+from __future__ import annotations
+
+import time
+import warnings
+
+import numpy as np
+
+from . import certificate as cert
+from . import controls as C
+from .relaxing import relax_increment
+from .rows import commit
+
+#: the predictor does not continue the motion of a block that an accepted increment leaves out of
+#: balance by more than this fraction of the forces on it (``kernels.relaxation.block_imbalance``)
+LOOSE_BLOCK = 0.1
+
+
+def run_stage(sim, stage, where, first=0, starts=None):
+    """Run the increments ``first`` ... of ``stage``, number ``where[0]`` of the ``where[1]``
+    stages of this ``run``; ``starts``: the controls' values at the stage's start when it is
+    continued from a checkpoint (default: their current values)."""
+    n = stage.increments
+    targets = {}
+    indirect = None
+    resumed = starts is not None
+    starts = dict(starts) if resumed else {}
+    for ctl in stage.controls:
+        key = C.key(ctl)
+        start = starts.setdefault(key, sim.values.get(key, 0.0))
+        targets[key] = (ctl, ctl.values(start, n))
+        if isinstance(ctl, C.L.Indirect):
+            indirect = ctl
+            if first == 0 and sim.factors.get(ctl.pattern.name) is not None:
+                sim.lam[0] = sim.factors[ctl.pattern.name]
+            C.pattern_forces(sim, ctl.pattern)
+    start_values = [[list(key), float(starts[key])] for key in targets]
+    sim.stage_name = stage.name
+    for i in range(first, n):
+        # a checkpoint inside increment i (after a committed part of a cut increment) continues
+        # it from there ...
+        sim.stage_position = (where[0], i, start_values, where[1], n)
+        goal = {key: vals[i] for key, (ctl, vals) in targets.items()}
+        # ... unless that part was its last: the controls at its goal, the increment done
+        if not (resumed and i == first and sim._checkpoint_inside
+                and all(sim.values.get(k) == v for k, v in goal.items())):
+            increment(sim, stage, targets, goal, indirect, depth=0)
+        sim.stage_position = (where[0], i + 1, start_values, where[1], n)
+        if (i + 1) % stage.frames == 0 or i == n - 1 or i + 1 in stage.frame_at:
+            sim.write_frame()
+        elif sim.checkpoints.due(sim):
+            sim.checkpoints.write(sim)
+        sim.progress.increment_done()
+    if indirect is not None:
+        C.release(sim, indirect)
+
+
+def increment(sim, stage, targets, goal, indirect, depth, parent_diss=None):
+    """Relax one increment to ``goal`` and commit it, or cut it in two and recurse;
+    ``parent_diss``: the damage dissipation (J) of the attempt this half replaces when that
+    one was cut for dissipating too much."""
+    inc = sim.options.increments
+    snap = C.snapshot(sim)
+    start = {key: sim.values.get(key, 0.0) for key in goal}
+    ctrl, pc, dctl = _set_up(sim, targets, goal, start, indirect, snap[0])
+    max_iter = stage.max_iter or inc.max_iter
+    tol = stage.tol or sim.options.convergence.tol
+    t0 = time.perf_counter()
+    out = relax_increment(sim, ctrl, pc, tol, max_iter,
+                          inc.stall_iter if depth < inc.max_cuts else 0)
+    elapsed = time.perf_counter() - t0
+    failed = cert.failure(sim, stage, out)
+    if failed:
+        C.restore(sim, snap)
+        sim.fail(failed)
+    v = cert.verdict(sim, out, depth, parent_diss)
+    if not v.accept:
+        C.restore(sim, snap)
+        sim._cut_work[0] += out.iterations
+        sim._cut_work[1] += elapsed
+        if depth >= inc.max_cuts:
+            sim.fail(cert.not_converged(sim, stage, out, v, tol, max_iter, depth))
+        diss = v.energies.diss if v.too_much else None
+        increment(sim, stage, targets, {k: 0.5 * (start[k] + goal[k]) for k in goal}, indirect,
+                  depth + 1, diss)
+        increment(sim, stage, targets, goal, indirect, depth + 1, diss)
+        return
+    if v.floor:
+        warnings.warn(f"increment {sim.increment + 1} of stage {stage.name!r} accepted at "
+                      f"residual ratio {out.residual:.2e} (tol {tol:.1e}, floor_tol "
+                      f"{sim.options.convergence.floor_tol:.1e}) after {out.iterations} "
+                      f"iterations, out-of-balance resultant {v.balance.ratio:.2%} of the "
+                      f"driving force", RuntimeWarning, stacklevel=2)
+    sim.du_prev = predictor_motion(sim, snap[0])
+    sim.dctl_prev = dctl
+    commit(sim, out, elapsed, v.energies, v.balance)
+    if depth > 0 and sim.checkpoints.due(sim):
+        sim.checkpoints.write(sim, inside=True)   # a part of a cut increment (hours, some)
+
+
+def _set_up(sim, targets, goal, start, indirect, u_before):
+    """Impose the controls at ``goal``, assemble the loads, predict the displacements and mark
+    what drives the increment; returns (ctrl (3,) int64, pc N: the indirect control of
+    ``R.relax``, the control's change)."""
+    for key, val in goal.items():
+        C.apply(sim, targets[key][0], val)
+        sim.values[key] = val
+    C.assemble_loads(sim, indirect)
+    ctrl = np.zeros(3, dtype=np.int64)
+    pc = 1.0
+    if indirect is not None:
+        ctrl[:], pc = C.control_dof(sim, indirect)
+    # predictor: continue the previous increment's motion when the control keeps its direction
+    dctl = sum(goal[k] - start[k] for k in goal)
+    if (sim.options.increments.predictor and sim.du_prev is not None and sim.dctl_prev != 0.0
+            and dctl * sim.dctl_prev > 0):
+        sim.dyn.U[:] += min(dctl / sim.dctl_prev, 2.0) * sim.du_prev * sim.dyn.free
+    C.drive(sim, [targets[k][0] for k in goal if goal[k] != start[k]], indirect)
+    return ctrl, pc, dctl
+
+
+def predictor_motion(sim, u_before):
+    """The accepted increment's displacement (n_nodes, 3) m from ``u_before`` on the free DOFs,
+    for the next increment's predictor; zero on the blocks still out of balance by more than
+    ``LOOSE_BLOCK``: they moved because they are loose, not because the load moved them
+    (continued row after row, S5 cyclic carried bricks out of the wall's plane a few mm per row:
+    docs/validation.md). The ratios are those ``R.relax`` left in ``dyn.bratio`` for the
+    accepted state."""
+    d = sim.dyn
+    du = (d.U - u_before) * d.free
+    du[np.repeat(d.bratio > LOOSE_BLOCK, np.diff(d.bstart))] = 0.0
+    return du
+

@@ -1,0 +1,117 @@
+"""Relaxing one load increment to rest: the compiled loop (``kernels.relaxation.relax``, or
+``kernels.damping_schemes.relax_scheme`` for a non-default damping scheme) in spans between coarse
+corrections, in calls short enough to keep Python responsive.
+
+:func:`relax_increment` is the only caller of the loop kernels in a run; it returns the attempt's
+``kernels.relaxation.Exit`` with the attempt's totals.
+"""
+from __future__ import annotations
+
+from contextlib import contextmanager
+
+import numba
+import numpy as np
+
+from ..kernels import relaxation as R
+
+#: most iterations of one compiled ``relax`` call (rounded down to a multiple of check_every):
+#: Python regains control at least this often (progress bar, Ctrl-C: seconds, not the tens of
+#: minutes one long increment of S6 or S7 runs)
+CALL_ITERATIONS = 2000
+#: models with fewer nodes relax on one thread: below it the second thread's wake-ups in the three
+#: parallel regions of an iteration cost more than it computes (docs/internals.md, "Decisions");
+#: a run is the same on any thread count, so this changes the run time only
+SERIAL_NODES = 500
+
+
+@contextmanager
+def threads_for(n_nodes):
+    """Numba threads for relaxing a model of ``n_nodes`` nodes: one below ``SERIAL_NODES``, else
+    as set; restored afterwards."""
+    threads = numba.get_num_threads()
+    if n_nodes < SERIAL_NODES:
+        numba.set_num_threads(1)
+    try:
+        yield
+    finally:
+        numba.set_num_threads(threads)
+
+
+def _loop(damping):
+    """``loop(mesh, cont, dyn, lam, ctrl, pc, crit, pr, state) -> (Exit, Progress, state)`` for
+    the scheme ``damping`` (a :class:`~dr_masonry.options.Damping`); the other schemes' module is
+    imported (and compiled) only by a run that uses one."""
+    if damping.scheme == "viscous":
+        def loop(mesh, cont, dyn, lam, ctrl, pc, crit, pr, state):
+            return R.relax(mesh, cont, dyn, lam, ctrl, pc, damping.alpha, damping.ring, crit,
+                           pr) + (state,)
+        return loop, None
+    from ..kernels import damping_schemes as D
+    code = {"kinetic": D.DAMP_KINETIC, "local": D.DAMP_LOCAL, "fire": D.DAMP_FIRE}[damping.scheme]
+
+    def loop(mesh, cont, dyn, lam, ctrl, pc, crit, pr, state):
+        return D.relax_scheme(mesh, cont, dyn, lam, ctrl, pc, code, damping.alpha, crit, pr,
+                              state)
+    return loop, D.start_state(code, damping.alpha)
+
+
+def relax_increment(sim, ctrl, pc, tol, max_iter, stall):
+    """Relax the increment set up on ``sim``'s arrays; returns its ``R.Exit`` with the attempt's
+    iterations and damped energy J.
+
+    With ``sim.use_coarse``, in spans of ``coarse_every`` iterations (doubled after a rejected
+    correction and after the tenth of an increment, up to 64 x; none after two rejections in a
+    row), each preceded by a coarse correction on the blocks' affine motions
+    (:mod:`dr_masonry.coarse`). ``ctrl`` (3,) int64 and ``pc`` N: the indirect control
+    (``R.relax``); ``stall``: the kernel's ``stall_iter``. A span runs as compiled calls of at
+    most ``CALL_ITERATIONS`` (the same iterates as one call: ``Progress.seg``), between which
+    ``sim.monitors`` run, the progress bar is updated and Ctrl-C is honoured.
+    """
+    o, d = sim.options, sim.dyn
+    c, k = o.convergence, o.coarse
+    loop, state = _loop(o.damping)
+    rejected = 0 if sim.use_coarse else 2
+    if sim.use_coarse:
+        if sim.coarse is None:
+            from ..coarse import BlockCoarse
+            sim.coarse = BlockCoarse(sim)
+        rpres = np.zeros((d.rpX.shape[0], 6))
+        sim.coarse.refresh()
+    call = max(c.check_every, CALL_ITERATIONS - CALL_ITERATIONS % c.check_every)
+    done, damped, every, tries, span_end = 0, 0.0, k.every, 0, 0
+    pr = R.start_progress()
+    with threads_for(d.U.shape[0]):
+        while True:
+            if done >= span_end:   # a new span, after a coarse correction while they help
+                if rejected < 2:
+                    R.place_rigid_nodes(d)
+                    R.internal_forces(sim.mesh, sim.cont, d)
+                    R.residual(d, sim.lam[0], rpres)
+                    ok = sim.coarse.correct(sim.lam, rpres, ctrl)
+                    rejected = 0 if ok else rejected + 1
+                    tries += 1
+                # a rejected correction, and every one after the first ten of an increment (in
+                # softening, accepted steps may keep restarting the relaxation without finishing
+                # it), let the relaxation run twice as long before the next try; after two
+                # rejections in a row (or without the coarse correction) plain relaxation
+                # finishes the increment
+                if rejected >= 2:
+                    every = max_iter
+                elif ok and tries <= 10:
+                    every = k.every
+                else:
+                    every = min(2 * every, 64 * k.every)
+                span_end = min(done + every, max_iter)
+                pr = pr._replace(seg=0)
+            crit = R.Criteria(float(tol), float(sim.ref_floor), float(c.block_tol),
+                              float(c.gap_tol), c.check_every, int(stall), 0.5 * sim.size,
+                              float(max_iter - done), min(span_end - done, call))
+            out, pr, state = loop(sim.mesh, sim.cont, d, sim.lam, ctrl, pc, crit, pr, state)
+            done += out.iterations
+            damped += out.damped
+            total = out._replace(iterations=done, damped=damped)
+            for monitor in sim.monitors:
+                monitor(sim, total, done)
+            if out.status != R.ST_MAXITER or done >= max_iter:
+                return total
+            sim.progress.working(sim, out.residual, done)
