@@ -6,7 +6,8 @@ contact springs written out from the force convention of ``kernels/contact_force
 with frame rows [n, t1, t2] (reference geometry), slave weight +1 and master weights -N_a, gives
 ``K_c = area * B^T diag(knn, kss, kss) B`` with ``B = frame @ [I, -N_0 I, .., -N_3 I]`` (3, 15).
 Supports clamp DOFs; rigid points tie nodes by the linearised map
-``u_i = u_p + theta_p x (X_i - X_p)``.
+``u_i = u_p + theta_p x (X_i - X_p)``. A spring marked compressed takes the joint law's
+compression penalty ``kc_pen`` as its normal stiffness instead of ``knn`` (kernels/joint_law.py).
 """
 import numpy as np
 import scipy.sparse as sp
@@ -36,8 +37,20 @@ def hex_matrix(model):
                          shape=(n, n))
 
 
-def contact_matrix(model):
-    """Global stiffness (3 n, 3 n) of the contact springs linearised at the reference state, N/m."""
+def contact_normals(model):
+    """Unit normals (n_contacts, 3) of the contact springs at the reference state."""
+    c, X = model.contacts, model.nodes
+    xm, frame = np.empty(3), np.empty((3, 3))
+    out = np.empty((c.n, 3))
+    for q in range(c.n):
+        contact_frame(np.ascontiguousarray(X[c.master[q]]), c.xi[q][0], c.xi[q][1], xm, frame)
+        out[q] = frame[0]
+    return out
+
+
+def contact_matrix(model, compressed=None):
+    """Global stiffness (3 n, 3 n) of the contact springs linearised at the reference state, N/m;
+    ``compressed``: (n_contacts,) bool, the springs whose normal stiffness is ``kc_pen``."""
     c = model.contacts
     X = model.nodes
     laws = model.joint_laws
@@ -52,7 +65,8 @@ def contact_matrix(model):
         w = np.concatenate([[1.0], -shp])
         B = np.einsum("a,ij->iaj", w, frame).reshape(3, 15)
         law = laws[c.law[q]]
-        kq = c.area[q] * B.T @ np.diag([law.knn, law.kss, law.kss]) @ B
+        kn = law.kc_pen if compressed is not None and compressed[q] else law.knn
+        kq = c.area[q] * B.T @ np.diag([kn, law.kss, law.kss]) @ B
         nodes = np.concatenate([[c.slave[q]], c.master[q]])
         dof = (3 * nodes[:, None] + np.arange(3)[None, :]).ravel()
         rows.append(np.repeat(dof, 15))
@@ -63,7 +77,7 @@ def contact_matrix(model):
                          shape=(n, n))
 
 
-def solve(model, fixed, f, rigid=()):
+def solve(model, fixed, f, rigid=(), compressed=None):
     """Linear displacements of the model under nodal forces.
 
     Parameters
@@ -75,13 +89,15 @@ def solve(model, fixed, f, rigid=()):
         nodal forces.
     rigid : sequence of (nodes (m,) int, position (3,) m, force (6,) N / N m)
         rigid points: tied nodes, reference position and generalised force on their 6 DOFs.
+    compressed : (n_contacts,) bool or None
+        springs in compression (normal stiffness ``kc_pen``); None: none.
 
     Returns
     -------
     U : (n, 3) m, nodal displacements; Q : (len(rigid), 6) rigid-point displacements/rotations.
     """
     n = model.n_nodes
-    K = hex_matrix(model) + contact_matrix(model)
+    K = hex_matrix(model) + contact_matrix(model, compressed)
     tied = np.zeros(n, dtype=bool)
     for nodes, _, _ in rigid:
         tied[nodes] = True
@@ -114,3 +130,18 @@ def solve(model, fixed, f, rigid=()):
     q = spla.spsolve((T.T @ K @ T).tocsc(), b)
     U = (T @ q).reshape(n, 3)
     return U, q[nf:].reshape(-1, 6)
+
+
+def rigid_point_stiffness(model, fixed, nodes, position, dof, held=(), compressed=None):
+    """Stiffness (N/m or N m/rad) of a rigid point's DOF ``dof`` (0..5: x, y, z, rx, ry, rz)
+    with the DOFs ``held`` at zero and the others free: the inverse of the flexibility matrix
+    of [dof, *held] (one linear solve per unit generalised force), its first diagonal term."""
+    which = [dof, *held]
+    flex = np.empty((len(which), len(which)))
+    zero = np.zeros((model.n_nodes, 3))
+    for j, k in enumerate(which):
+        force = np.zeros(6)
+        force[k] = 1.0
+        _, Q = solve(model, fixed, zero, [(nodes, position, force)], compressed)
+        flex[:, j] = Q[0, which]
+    return np.linalg.inv(flex)[0, 0]
