@@ -1,12 +1,19 @@
 """Helpers shared by several test modules (imported as ``from conftest import ...``; pytest puts
 this folder on ``sys.path``): closed forms of the wall scenes and a tiny model with a fake results
-file for the readers, plots and command line."""
+file for the readers, plots and command line, a two-brick wall for the compile tests, and
+hexahedron meshes with the force kernel's elastic forces on them (test_hex8, test_corotational)."""
 import dataclasses
+import warnings
 from types import SimpleNamespace
 
 import numpy as np
 
-from dr_masonry.model import Model
+from dr_masonry import JointLaw, Load, PlasticDamage, Simulation, SolverOptions, Stage
+from dr_masonry.geometry import BrickSpec, add_wall, plane_nodes
+from dr_masonry.kernels import forces, hex8
+from dr_masonry.kernels.plastic_damage import NMS
+from dr_masonry.loading import Gravity
+from dr_masonry.model import HEX_NATURAL, Model
 from dr_masonry.results import ResultWriter
 
 
@@ -78,3 +85,74 @@ def write_fake_result(path, n_rows=5, frames=(0, 2, 4)):
             if i in frames:
                 w.write_frame(i, fake_fields(m, i), attrs={"control": 1e-4 * i})
     return m, cfg
+
+
+def tiny_wall():
+    """Simulation of a two-brick wall clamped at its base (test_precompile and its subprocesses)."""
+    model = Model()
+    model.set_joint_law(JointLaw.reference())
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # length snapped to half bricks
+        add_wall(model, (0, 0, 0), 0.44, 0.243, PlasticDamage.reference(),
+                 brick=BrickSpec(nx_along=2, ny_thick=1, nz_height=1))
+    sim = Simulation(model, SolverOptions(progress=False))
+    sim.fix(plane_nodes(model, 2, 0.0), "xyz")
+    return sim
+
+
+def gravity():
+    """One increment of self-weight."""
+    return [Stage("gravity", 1, [Load(pattern=Gravity(), to=1.0)])]
+
+
+def elastic_params(E, nu):
+    """Material parameter row of an elastic block material (E Pa, nu), 2000 kg/m^3."""
+    return PlasticDamage.elastic(E, nu, 2000.0).params_array()
+
+
+def box_mesh(n, size=(1.0, 1.0, 1.0)):
+    """Structured mesh of [0, size] with n = (nx, ny, nz) hexahedra, VTK corner order."""
+    nx, ny, nz = n
+    g = [np.linspace(0.0, s, k + 1) for s, k in zip(size, n)]
+    Z, Y, Xg = np.meshgrid(g[2], g[1], g[0], indexing="ij")
+    X = np.stack([Xg.ravel(), Y.ravel(), Z.ravel()], axis=1)
+    I, J, K = (a.ravel() for a in np.meshgrid(np.arange(nx), np.arange(ny), np.arange(nz),
+                                              indexing="ij"))
+
+    def nid(i, j, k):
+        return i + (nx + 1) * (j + (ny + 1) * k)
+    conn = np.stack([nid(I, J, K), nid(I + 1, J, K), nid(I + 1, J + 1, K), nid(I, J + 1, K),
+                     nid(I, J, K + 1), nid(I + 1, J, K + 1), nid(I + 1, J + 1, K + 1),
+                     nid(I, J + 1, K + 1)], axis=1)
+    return X, conn.astype(np.int64)
+
+
+def distorted_element(rng, amp=0.15):
+    """Corners (8, 3) m of a 1 x 0.8 x 1.2 m box with every corner moved by up to ``amp``."""
+    return 0.5 * (HEX_NATURAL + 1.0) * [1.0, 0.8, 1.2] + rng.uniform(-amp, amp, (8, 3))
+
+
+def update_flags(ne):
+    """``pristine`` and ``dirty`` of ``hex_forces`` for the full state update everywhere."""
+    return np.zeros(ne, np.uint8), np.zeros(ne, np.uint8)
+
+
+def run_forces(U, X, conn, E, nu, elem_mat=None, params=None, corot=False):
+    """Element forces, energies and nodal forces of an elastic mesh (``corot``: every element on
+    the corotational path of a run, else at its Gauss points)."""
+    ne = conn.shape[0]
+    dN, geo, wdet, h = hex8.hex_geometry_shared(X, conn)
+    if params is None:
+        params = elastic_params(E, nu)[None, :]
+        elem_mat = np.zeros(ne, dtype=np.int64)
+    tables = (hex8.corot_tables(X, conn, dN, geo, wdet, elem_mat, params, np.arange(ne))
+              if corot else None)
+    s_old = np.zeros((ne, 8, NMS))
+    s_new = np.zeros((ne, 8, NMS))
+    f_elem = np.full((ne, 8, 3), np.nan)
+    energy = np.full(ne, np.nan)
+    forces.hex_forces(np.ascontiguousarray(U, dtype=float), conn, np.arange(ne), dN, geo, wdet, h,
+                    elem_mat, params, s_old, s_new, *update_flags(ne), f_elem, energy, corot=tables)
+    f_node = np.zeros_like(X)
+    np.add.at(f_node, conn.ravel(), f_elem.reshape(-1, 3))
+    return f_elem, energy, f_node

@@ -10,7 +10,7 @@ import pytest
 from dr_masonry import cli
 from dr_masonry.cli import main
 from dr_masonry.params import ParameterError, parse_overrides
-from test_results import write_fake_result
+from conftest import write_fake_result
 
 PARAMS = {"n": 4, "drift": 0.01, "name": "wall", "cyclic": False, "mesh": (4, 1, 2),
           "amps": [0.1, 0.2], "extra": None, "opts": {"a": 1}}
@@ -133,7 +133,7 @@ def test_info_checkpoint_after_the_last_frame(tmp_path, capsys):
 
 def test_info_restarts_and_rows_above_tol(tmp_path, capsys):
     """info says what each restart changed and which rows were accepted above tol (floor_tol)."""
-    from test_results import tiny_model
+    from conftest import tiny_model
     from dr_masonry.results import ResultWriter
     p = tmp_path / "r.h5"
     cfg = {"max_iter": 200, "floor_tol": 0.0, "solver": {"tol": 1e-4, "max_iter": 200}}
@@ -162,7 +162,7 @@ def test_info_restarts_and_rows_above_tol(tmp_path, capsys):
 def test_info_checks(tmp_path, capsys):
     """info names the largest energy-balance error, block imbalance (rows before the column
     existed are NaN) and overhang with their rows, and counts the rows above the run's limits."""
-    from test_results import tiny_model
+    from conftest import tiny_model
     from dr_masonry.results import ResultWriter
     p = tmp_path / "r.h5"
     cfg = {"solver": {"tol": 1e-4, "energy_tol": 0.01, "block_tol": 0.1}}

@@ -13,7 +13,8 @@ import naive_hex8 as nv
 from dr_masonry.kernels import forces, hex8
 from dr_masonry.kernels.plastic_damage import MS_DT, MS_EPSP, NMS, gp_update
 from dr_masonry.materials.plastic_damage import PlasticDamage
-from test_hex8 import box_mesh, distorted_element, run_forces
+
+from conftest import box_mesh, distorted_element, run_forces
 
 E, NU = 3e10, 0.2
 

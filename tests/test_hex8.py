@@ -11,60 +11,11 @@ from dr_masonry.kernels.plastic_damage import MP_HMAX, NMS
 from dr_masonry.materials.plastic_damage import PlasticDamage
 from dr_masonry.model import HEX_NATURAL
 
+from conftest import update_flags, box_mesh, distorted_element, elastic_params, run_forces
+
 # faces of a hexahedron, corners ordered so that (x_r x x_s) points outwards
 FACES = ((0, 3, 2, 1), (4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7))
 QUAD = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], dtype=float)
-
-
-def elastic_params(E, nu):
-    return PlasticDamage.elastic(E, nu, 2000.0).params_array()
-
-
-def box_mesh(n, size=(1.0, 1.0, 1.0)):
-    """Structured mesh of [0, size] with n = (nx, ny, nz) hexahedra, VTK corner order."""
-    nx, ny, nz = n
-    g = [np.linspace(0.0, s, k + 1) for s, k in zip(size, n)]
-    Z, Y, Xg = np.meshgrid(g[2], g[1], g[0], indexing="ij")
-    X = np.stack([Xg.ravel(), Y.ravel(), Z.ravel()], axis=1)
-    I, J, K = (a.ravel() for a in np.meshgrid(np.arange(nx), np.arange(ny), np.arange(nz),
-                                              indexing="ij"))
-
-    def nid(i, j, k):
-        return i + (nx + 1) * (j + (ny + 1) * k)
-    conn = np.stack([nid(I, J, K), nid(I + 1, J, K), nid(I + 1, J + 1, K), nid(I, J + 1, K),
-                     nid(I, J, K + 1), nid(I + 1, J, K + 1), nid(I + 1, J + 1, K + 1),
-                     nid(I, J + 1, K + 1)], axis=1)
-    return X, conn.astype(np.int64)
-
-
-def distorted_element(rng, amp=0.15):
-    return 0.5 * (HEX_NATURAL + 1.0) * [1.0, 0.8, 1.2] + rng.uniform(-amp, amp, (8, 3))
-
-
-def _flags(ne):
-    """``pristine`` and ``dirty`` of ``hex_forces`` for the full state update everywhere."""
-    return np.zeros(ne, np.uint8), np.zeros(ne, np.uint8)
-
-
-def run_forces(U, X, conn, E, nu, elem_mat=None, params=None, corot=False):
-    """Element forces, energies and nodal forces of an elastic mesh (``corot``: every element on
-    the corotational path of a run, else at its Gauss points)."""
-    ne = conn.shape[0]
-    dN, geo, wdet, h = hex8.hex_geometry_shared(X, conn)
-    if params is None:
-        params = elastic_params(E, nu)[None, :]
-        elem_mat = np.zeros(ne, dtype=np.int64)
-    tables = (hex8.corot_tables(X, conn, dN, geo, wdet, elem_mat, params, np.arange(ne))
-              if corot else None)
-    s_old = np.zeros((ne, 8, NMS))
-    s_new = np.zeros((ne, 8, NMS))
-    f_elem = np.full((ne, 8, 3), np.nan)
-    energy = np.full(ne, np.nan)
-    forces.hex_forces(np.ascontiguousarray(U, dtype=float), conn, np.arange(ne), dN, geo, wdet, h,
-                    elem_mat, params, s_old, s_new, *_flags(ne), f_elem, energy, corot=tables)
-    f_node = np.zeros_like(X)
-    np.add.at(f_node, conn.ravel(), f_elem.reshape(-1, 3))
-    return f_elem, energy, f_node
 
 
 def face_integrals(xe):
@@ -181,7 +132,7 @@ def test_damaging_material_below_cracking_is_elastic():
     s_new = np.full_like(s_old, np.nan)
     f_elem, energy = np.empty((1, 8, 3)), np.empty(1)
     forces.hex_forces(U, conn, np.array([0]), dN, geo, wdet, h, np.zeros(1, np.int64),
-                    mat.params_array()[None, :], s_old, s_new, *_flags(1), f_elem, energy)
+                    mat.params_array()[None, :], s_old, s_new, *update_flags(1), f_elem, energy)
     f_ref, en_ref, _, _ = nv.element_forces(X, U, 5e9, 0.15)
     assert np.abs(f_elem[0] - f_ref).max() <= 1e-10 * np.abs(f_ref).max()
     assert energy[0] == pytest.approx(en_ref, rel=1e-10)
@@ -216,7 +167,7 @@ def test_pristine_elements_skip_the_state_bit_for_bit():
     fast_new, dirty = s_old.copy(), np.zeros(ne, np.uint8)
     for U in (elastic, cracking, elastic, cracking):
         full_new = np.full_like(s_old, np.nan)
-        f_full, en_full = evaluate(U, full_new, *_flags(ne))
+        f_full, en_full = evaluate(U, full_new, *update_flags(ne))
         f_fast, en_fast = evaluate(U, fast_new, pristine, dirty)
         assert np.array_equal(f_fast, f_full) and np.array_equal(en_fast, en_full)
         assert np.array_equal(fast_new, full_new)       # the trial state, wherever it was kept
@@ -243,7 +194,7 @@ def test_inactive_elements_untouched():
     s_old, s_new = np.zeros((ne, 8, NMS)), np.full((ne, 8, NMS), -7.0)
     active = np.array([4, 1], dtype=np.int64)
     forces.hex_forces(rng.normal(0, 1e-3, X.shape), conn, active, dN, geo, wdet, h,
-                    np.zeros(ne, np.int64), params, s_old, s_new, *_flags(ne), f_elem, energy)
+                    np.zeros(ne, np.int64), params, s_old, s_new, *update_flags(ne), f_elem, energy)
     idle = np.setdiff1d(np.arange(ne), active)
     assert np.all(f_elem[idle] == -7.0) and np.all(energy[idle] == -7.0)
     assert np.all(s_new[idle] == -7.0)
@@ -350,7 +301,7 @@ def test_shared_tables_match_per_element_tables():
     for d, g, w, hh in ((dN, geo, wdet, h), (dNe, geoe, wde, he)):
         f, en, sn = np.full((ne, 8, 3), np.nan), np.full(ne, np.nan), np.full_like(s_old, -1.0)
         forces.hex_forces(U, conn, np.arange(ne), d, g, w, hh, elem_mat, params, s_old, sn,
-                        *_flags(ne), f, en)
+                        *update_flags(ne), f, en)
         out.append((f, en, sn))
     (f, en, sn), (fe, ene, sne) = out
     assert np.abs(f - fe).max() <= 1e-12 * np.abs(fe).max()

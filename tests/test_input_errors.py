@@ -16,7 +16,7 @@ from dr_masonry.model import ModelError
 from dr_masonry.options import FLAT, OptionsError
 from dr_masonry.protocols import S5
 from dr_masonry.results import ResultsError, make_folder, open_result
-from test_results import write_fake_result
+from conftest import write_fake_result
 
 MAT = PlasticDamage.elastic(10e9, 0.2, 2000.0)
 

@@ -14,7 +14,7 @@ from numba.core import event
 
 from dr_masonry.interrupts import Terminated, terminate_as_interrupt, uninterrupted
 from dr_masonry.results import CHECKPOINT_NEW, ResultWriter, open_result
-from test_results import write_fake_result
+from conftest import write_fake_result
 
 
 @pytest.fixture(autouse=True)

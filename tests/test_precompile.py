@@ -10,29 +10,9 @@ import warnings
 
 import pytest
 
-from dr_masonry import JointLaw, Load, Model, PlasticDamage, Simulation, SolverOptions, Stage
 from dr_masonry import precompile as P
-from dr_masonry.geometry import BrickSpec, add_wall, plane_nodes
-from dr_masonry.loading import Gravity
 
-
-def tiny_wall():
-    """Simulation of a two-brick wall clamped at its base (also imported by the cold start's
-    subprocess below)."""
-    model = Model()
-    model.set_joint_law(JointLaw.reference())
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # length snapped to half bricks
-        add_wall(model, (0, 0, 0), 0.44, 0.243, PlasticDamage.reference(),
-                 brick=BrickSpec(nx_along=2, ny_thick=1, nz_height=1))
-    sim = Simulation(model, SolverOptions(progress=False))
-    sim.fix(plane_nodes(model, 2, 0.0), "xyz")
-    return sim
-
-
-def gravity():
-    """One increment of self-weight."""
-    return [Stage("gravity", 1, [Load(pattern=Gravity(), to=1.0)])]
+from conftest import gravity, tiny_wall
 
 
 @pytest.fixture
@@ -76,7 +56,7 @@ def test_no_worker_without_compilation():
     script = textwrap.dedent(f"""\
         import sys
         sys.path.insert(0, {os.path.dirname(__file__)!r})
-        from test_precompile import tiny_wall
+        from conftest import tiny_wall
         from dr_masonry import precompile
         sim = tiny_wall()
         sim.build()
@@ -96,7 +76,7 @@ def test_cold_start_compiles_the_force_kernel_in_the_worker_only(tmp_path):
         import json, sys
         from numba.core import event
         sys.path.insert(0, {os.path.dirname(__file__)!r})
-        from test_precompile import gravity, tiny_wall
+        from conftest import gravity, tiny_wall
         sim = tiny_wall()
         with event.install_recorder("numba:compile") as rec:
             sim.run(gravity())

@@ -304,12 +304,12 @@ def test_runaway_reference_point_and_inverted_element_are_named():
     free DOFs), and a non-finite stop names an element that has turned inside out (corotational
     elastic elements get NaN forces there)."""
     from dr_masonry import Force, Stage
-    from test_damping import _loaded_column
-    sim, rp = _loaded_column()
+    from naive_relaxation import loaded_column
+    sim, rp = loaded_column()
     sim.options.damping.scheme = "viscous"
     with pytest.raises(SolverError, match=r"run-away displacement .* at reference point 'tip' "):
         sim.run([Stage("throw", 1, [Force(target=rp, dof="x", to=1e12)])])
-    sim, rp = _loaded_column()
+    sim, rp = loaded_column()
     z = sim.dyn.X[:, 2]
     low = np.nonzero((z > 0.0) & (z < 0.08))[0]      # the first block's free nodes above its base
     sim.dyn.U[low, 2] = -2.0 * z[low]                 # mirrored below the base: inside out

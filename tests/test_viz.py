@@ -15,7 +15,7 @@ from dr_masonry.results import ResultsError, ResultWriter, open_result
 from dr_masonry.viz import plots, render
 from dr_masonry.viz.render import RenderError, exterior_faces, render_model
 from dr_masonry.viz.vtk_series import block_corner_nodes, export_vtk
-from test_results import fake_fields, tiny_model, write_fake_result
+from conftest import fake_fields, tiny_model, write_fake_result
 
 
 @pytest.fixture()

@@ -245,7 +245,7 @@ def test_energy_per_cycle_input_errors(tmp_path):
     amplitudes; bad units are refused."""
     from dr_masonry.postprocess import cycle_text
     from dr_masonry.results import ResultWriter
-    from test_results import tiny_model
+    from conftest import tiny_model
     u = np.array([0, 1, 2, 1, 0, -1, -2, -1, 0.0]) * 1e-3
     f = np.array([0, 10, 15, 16, 0, -10, -14, -4, 0.0]) * 1e3
     h = dict(u=u, F=f, D_blocks=np.linspace(0, 2, 9), D_joints=np.linspace(0, 6, 9),
