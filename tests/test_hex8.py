@@ -11,7 +11,7 @@ from dr_masonry.kernels.plastic_damage import MP_HMAX, NMS
 from dr_masonry.materials.plastic_damage import PlasticDamage
 from dr_masonry.model import HEX_NATURAL
 
-from conftest import update_flags, box_mesh, distorted_element, elastic_params, run_forces
+from conftest import box_mesh, distorted_element, elastic_params, run_forces, update_flags
 
 # faces of a hexahedron, corners ordered so that (x_r x x_s) points outwards
 FACES = ((0, 3, 2, 1), (4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7))

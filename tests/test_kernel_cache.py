@@ -44,8 +44,33 @@ def test_editing_a_callee_recompiles_its_cached_caller(tmp_path):
     assert _run(tmp_path) == "2"
 
 
-def test_kernels_use_the_package_stamp():
-    from dr_masonry.kernels import relaxation
-    locator = relaxation.relax._cache._impl.locator
-    assert isinstance(locator, config._Stamped)
-    assert locator.get_source_stamp() == config._sources_stamp()
+#: compiles one kernel under NUMBA_CACHE_DIR and prints how many functions Numba compiled (0:
+#: every one came from the cache); with argv[1] "edited" the kernel's module is loaded again under
+#: another package stamp, as after an edit of any kernel file
+STAMPED = textwrap.dedent("""\
+    import importlib, sys
+    import numpy as np
+    from numba.core import event
+    from dr_masonry.kernels import config, contact_frame as module
+    if sys.argv[1] == "edited":
+        config._Stamped._stamp = "the stamp of an edited package"
+        module = importlib.reload(module)
+    xq = np.array([[0.0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]])
+    with event.install_recorder("numba:compile") as rec:
+        assert module.contact_frame(xq, 0.0, 0.0, np.empty(3), np.empty((3, 3))) == 0.25
+    print(sum(ev.is_start for _, ev in rec.buffer))
+    """)
+
+
+def test_kernels_use_the_package_stamp(tmp_path):
+    """A kernel compiled once is loaded from the cache the next time; once the package's stamp
+    differs (any kernel file edited) it is compiled again."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path))
+
+    def compiled(stamp):
+        out = subprocess.run([sys.executable, "-c", STAMPED, stamp], env=env, capture_output=True,
+                             text=True, check=True)
+        return int(out.stdout.strip().splitlines()[-1])
+    assert compiled("as is") >= 1
+    assert compiled("as is") == 0
+    assert compiled("edited") >= 1

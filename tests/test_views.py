@@ -10,7 +10,7 @@ from dr_masonry.viz import render
 from dr_masonry.viz.render import RenderError, exterior_faces
 from dr_masonry.viz.views import (auto_warp, damage_view, joint_patches, node_values,
                                   shrunk_positions, write_views)
-from test_results import fake_fields, tiny_model, write_fake_result
+from conftest import fake_fields, tiny_model, write_fake_result
 
 needs_vtk = pytest.mark.skipif(not render.vtk_offscreen_available(),
                                reason="no VTK offscreen rendering here")
