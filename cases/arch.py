@@ -50,6 +50,7 @@ PARAMS = dict(
     depth=0.25,             # depth of the ring along y, m
     abutment_height=0.3,    # height of the springings above the ground, m
     mu=1.0,                 # friction coefficient of the dry joints
+    knn=75e9,               # normal stiffness of the dry joints, Pa/m (shear: a tenth of it)
     young=10e9,             # Young's modulus of the voussoirs, Pa (stiff: nearly rigid blocks)
     density=2000.0,         # kg/m^3
     load="tilt",            # gravity | tilt
@@ -79,7 +80,8 @@ def build(params):
     ri = R - 0.5 * t
     arch = add_arch(model, mat, span=2 * ri, rise=ri, thickness=t, depth=params["depth"],
                     n=params["n"], abutment_height=params["abutment_height"],
-                    joint=JointLaw.dry(params["mu"]))
+                    joint=JointLaw.dry(params["mu"], knn=params["knn"],
+                                       kss=0.1 * params["knn"]))
     sim = Simulation(model, solver_options(params), output=params.get("h5"), config=params)
     sim.contact_reaction("abutments", arch.voussoirs, arch.abutments)
     crown = model.block_nodes(arch.voussoirs[params["n"] // 2])
