@@ -13,9 +13,7 @@ the arch is a chain of nearly rigid blocks, which is what the reference assumes:
   under its own weight at any gravity.
 * ``load=tilt`` (default): the tilting table, self-weight then a horizontal body force ``lam g``
   along +x ramped by ``step`` to ``lam_max`` (:mod:`dr_masonry.collapse`). Reference: the same LP's
-  largest ``lam`` and its four hinges (n = 12: 0.1573 at t/R = 0.15, 0.2852 at t/R = 0.2;
-  Ochsendorf's tilting-table tests, "The masonry arch on spreading supports", Struct. Eng. 84,
-  2006, measured this mechanism).
+  largest ``lam`` and its four hinges (n = 12: 0.1573 at t/R = 0.15, 0.2852 at t/R = 0.2).
 
 Collapse is the run's diagnosis, not an error: past the collapse factor the increment has no
 equilibrium, the solver cuts it ``max_cuts`` times and stops; the scene reports the last converged

@@ -5,7 +5,7 @@ Usage: ``python docs/make_arch_figures.py``: runs the arch scene (n = 12, R = 1 
 table, and the dry-wall scene (a block that overturns, one that slides, a stack of three, the
 block on a wider coarse base); writes the mechanisms into docs/arch/ and prints the table of the
 LP's (tests/limit_analysis.py) or the closed form's numbers against this code's, with run times.
-About a minute on 2 cores.
+About 15 s on 2 cores.
 """
 import os
 import sys
