@@ -73,6 +73,9 @@ def tilt_stages(lam_max, step, gravity_increments=2):
 def run_to_collapse(sim, stages, reaction):
     """Run ``stages`` on ``sim`` (a :class:`~dr_masonry.Simulation` with a contact reaction named
     ``reaction`` between the moving blocks and their supports) and return a :class:`Collapse`.
+    The stages load by self-weight and the tilt only (:func:`tilt_stages`): the factor of an
+    attempt is the ratio of the applied horizontal and vertical loads, read by a monitor
+    (``Simulation.monitors``) that also keeps the attempt's displacements.
     A :class:`~dr_masonry.solver.SolverError` is the collapse, not an error: the rows before it
     stay in the history (and the result file)."""
     from .solver import SolverError
