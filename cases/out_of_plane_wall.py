@@ -73,6 +73,10 @@ FAST = dict(length=0.88, height=0.81, mesh="coarse", target=3 * mm, increments=6
 #: history columns of the curve (for studies): centre displacement, total lateral force
 CURVE = dict(x="centre.uy", y="lambda", stage="push", xscale=1e3, yscale=1e-3,
              xlabel="centre displacement (mm)", ylabel="lateral force (kN)")
+#: 3-D damage views (dr_masonry.viz.views.damage_view): the wall's front (loaded, y = 0) and back
+#: faces, bricks by tensile damage, the damaged joints (paper Fig. 20)
+VIEWS = {"view_front": dict(camera="elevation", field="dt"),
+         "view_back": dict(camera="back", field="dt")}
 
 
 def build(params):

@@ -29,6 +29,7 @@ PARAMS = dict(squat_wall.PARAMS, length=1.10, height=2.75, sigma=0.52 * MPa, bc=
               drift=S4.monotonic, increments=40, step=1.0 * mm, out="results/slender_wall")
 FAST = squat_wall.FAST
 CURVE = squat_wall.CURVE
+VIEWS = squat_wall.VIEWS
 
 
 def build(params):

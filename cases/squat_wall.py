@@ -222,6 +222,10 @@ def base_reaction(hist, rows):
 #: crack maps of the wall's elevation: joint damage with block tensile, and with compressive damage
 MAPS = {"cracks": dict(plane="xz", blocks="wall"),
         "crushing": dict(plane="xz", blocks="wall", element_field="dc")}
+#: 3-D damage views (dr_masonry.viz.views.damage_view) of the wall's elevation: bricks by tensile,
+#: and by compressive damage, the damaged joints on both
+VIEWS = {"view_cracks": dict(camera="elevation", field="dt"),
+         "view_crushing": dict(camera="elevation", field="dc")}
 
 
 def main(argv=None, doc=__doc__, defaults=PARAMS, protocol=S5, title="S5 squat wall"):

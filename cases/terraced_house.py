@@ -77,6 +77,11 @@ FAST = dict(mesh="tiny", target=3 * mm, increments=5, gravity_increments=2, step
 #: history columns of the curve (for studies): top-floor displacement, base shear (half model)
 CURVE = dict(x="floor2.ux", y="lambda", stage="push", xscale=1e3, yscale=4e-3,  # kN of the whole house: 2 floors x 2 halves
              xlabel="top displacement (mm)", ylabel="base shear, whole house (kN)")
+#: 3-D damage views (dr_masonry.viz.views.damage_view): the facade, and the house from a corner with
+#: the facade (the blocks whose centre is within a brick's thickness of y = 0) cut away so that the
+#: transversal walls show (paper Figs. 24-25)
+VIEWS = {"view_facade": dict(camera="facade", field="dt"),
+         "view_inside": dict(camera="iso", field="dt", cut=(1, BrickSpec().thickness))}
 
 CONCRETE = PlasticDamage.elastic(30e9, 0.2, 2400.0)
 MESHES = {"coarse": BrickSpec(nx_along=1, nz_height=1, ny_thick=1), "fine": BrickSpec()}

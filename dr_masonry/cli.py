@@ -1,10 +1,14 @@
-"""Command line: ``dr-masonry run | study | vtk | info | list`` (also ``python -m dr_masonry``).
+"""Command line: ``dr-masonry run | study | vtk | info | pack | animate | report | list``.
+
+Also ``python -m dr_masonry``.
 
 ``run <case> [key=value ...]``  run ``dr_masonry.cases.<case>`` with parameter overrides
 ``study <case> [--vary key=v1,v2 ...] [--set key=value ...]``  a parameter study through Dask
 ``vtk <result.h5> [out_dir]``   write the VTK time series (.vtu + .pvd)
 ``info <result.h5> [--peak KEY ...]``  model size, configuration, increments, frames, last row
 ``pack <result.h5> <copy.h5> [--frames ...]``  a compressed copy a run can be continued from
+``animate <result.h5> [out.gif|out.mp4]``  the damaged structure beside the curve, frame by frame
+``report <result.h5> [out.html]``  one self-contained HTML page of the run
 ``list``                        the cases available
 
 Case scripts parse their ``key=value`` arguments with :func:`dr_masonry.params.parse_overrides`.
@@ -99,8 +103,7 @@ def _cmd_info(args):
                  or "same parameters"))
     print(f"history:   {r.n_history} rows (numbered from 1 below, as in the run's messages), "
           f"columns {list(r.history)}")
-    print(_above_tol(r))
-    for line in _checks(r):
+    for line in certificate(r):
         print(line)
     ids = r.frame_ids
     print(f"frames:    {r.n_frames}" + (f" (increments {ids[0]} .. {ids[-1]})" if ids else ""))
@@ -114,7 +117,7 @@ def _cmd_info(args):
     if kept:
         print(f"kept checkpoints: increments {', '.join(map(str, kept))} (resume_from=INCREMENT)")
     if r.n_history:
-        print("last row:  " + ", ".join(f"{k}={v[-1]:.6g}" for k, v in r.history.items()))
+        print("last row:  " + ", ".join(f"{k}={v}" for k, v in last_row(r).items()))
         unknown = [k for k in args.peak if k not in r.history]
         if unknown:
             raise ParameterError(f"info --peak: no history column {unknown}; columns are "
@@ -123,6 +126,29 @@ def _cmd_info(args):
             v = r.history[k]
             i, j = int(np.argmax(v)), int(np.argmin(v))
             print(f"peak {k}: max {v[i]:.6g} (row {i + 1}), min {v[j]:.6g} (row {j + 1})")
+    return 0
+
+
+def _curve_arg(text):
+    """``--curve X,Y`` (history columns) as a curve dict, or None."""
+    if text is None:
+        return None
+    cols = [c.strip() for c in text.split(",")]
+    if len(cols) != 2 or not all(cols):
+        raise ParameterError(f"--curve {text!r}: expected two history columns X,Y")
+    return {"x": cols[0], "y": cols[1], "stage": None}
+
+
+def _cmd_animate(args):
+    from dr_masonry.viz.animate import animate
+    print(animate(args.result, args.out, case=args.case, curve=_curve_arg(args.curve),
+                  field=args.field, camera=args.camera, fps=args.fps))
+    return 0
+
+
+def _cmd_report(args):
+    from dr_masonry.viz.report import write_report
+    print(write_report(args.result, args.out, case=args.case, curve=_curve_arg(args.curve)))
     return 0
 
 
@@ -166,6 +192,20 @@ def _changed(config, later):
         top = k.removeprefix("solver.")
         return top != k and top in diff and diff[top][1] == new
     return {k: v for k, v in diff.items() if not echoed(k, v[1])}
+
+
+def certificate(r):
+    """The lines of ``dr-masonry info`` on what the rows of result ``r`` can be trusted for: the
+    rows accepted above the run's tolerance (:func:`_above_tol`), the energy balance, every
+    block's balance and the joints' overhang (:func:`_checks`); ``dr-masonry report`` prints
+    the same lines."""
+    return [_above_tol(r)] + _checks(r)
+
+
+def last_row(r):
+    """``{column: "%.6g" text}`` of the last history row of result ``r``, as ``info`` prints
+    it (empty for a file without rows)."""
+    return {k: f"{v[-1]:.6g}" for k, v in r.history.items()} if r.n_history else {}
 
 
 def _above_tol(r):
@@ -285,6 +325,25 @@ def _parser():
     s.add_argument("--frames", nargs="*", default=[], metavar="INCREMENT",
                    help="increments of the frames to keep, or 'all' (default: none)")
     s.set_defaults(func=_cmd_pack)
+    for name, what in (("animate", "an animation (GIF, or MP4 with ffmpeg) of the damaged "
+                                   "structure beside the force-displacement curve"),
+                       ("report", "one self-contained HTML page of a run: parameters, curve, "
+                                  "damage views, equilibrium certificate, cycles, run time")):
+        s = sub.add_parser(name, help=what)
+        s.add_argument("result")
+        s.add_argument("out", nargs="?", help="output file (default next to the result: "
+                       + ("<stem>.gif)" if name == "animate" else "<stem>_report.html)"))
+        s.add_argument("--case", help="the scene (default: the case whose parameters the "
+                       "file's configuration holds)")
+        s.add_argument("--curve", metavar="X,Y", help="history columns of the curve (default "
+                       "the scene's CURVE)")
+        if name == "animate":
+            s.add_argument("--field", default="dt", choices=["dt", "dc"],
+                           help="brick colouring (default dt)")
+            s.add_argument("--camera", help="elevation, back, facade or iso (default the "
+                           "scene's first view)")
+            s.add_argument("--fps", type=float, default=2.0, help="frames per second")
+        s.set_defaults(func=_cmd_animate if name == "animate" else _cmd_report)
     s = sub.add_parser("list", help="list the cases")
     s.set_defaults(func=_cmd_list)
     return p

@@ -392,16 +392,17 @@ def _draw_vtk(arrays, x, xs, values, keep, slabs, png, camera, size, field, join
     win.Finalize()
 
 
-def write_views(result, out, frames, views, curve=None):
+def write_views(result, out, frames, views, curve=None, **common):
     """Damage views ``{out}_{name}_{tag}.png`` of each ``(tag, frame)`` of ``frames`` (e.g.
     :func:`dr_masonry.scene.map_frames`) and each ``{name: keyword arguments of
     damage_view}`` of ``views``, all with the displacement magnification of :func:`auto_warp` at
     the frame of the largest displacement unless a view gives its own ``warp``; ``curve`` (a
-    case's CURVE) puts the row's values in the titles. Returns the written paths."""
+    case's CURVE) puts the row's values in the titles; ``common``: keyword arguments of every
+    view (a view's own win). Returns the written paths."""
     r = result if isinstance(result, Result) else open_result(result)
     if not frames:
         return []
     warp = min(auto_warp(r, frame) for _, frame in frames)   # one magnification for all
     return [damage_view(r, f"{out}_{name}_{tag}.png", frame=frame, curve=curve,
-                        **dict({"warp": warp}, **kw)).path
+                        **dict({"warp": warp}, **common, **kw)).path
             for tag, frame in frames for name, kw in views.items()]
