@@ -1,12 +1,14 @@
 """Helpers shared by several test modules (imported as ``from conftest import ...``; pytest puts
 this folder on ``sys.path``): closed forms of the wall scenes and a tiny model with a fake results
-file for the readers, plots and command line, a two-brick wall for the compile tests, and
+file for the readers, plots and command line, figures recorded as they are saved (to read a
+picture's pixels at data points), a two-brick wall for the compile tests, and
 hexahedron meshes with the force kernel's elastic forces on them (test_hex8, test_corotational)."""
 import dataclasses
 import warnings
 from types import SimpleNamespace
 
 import numpy as np
+from matplotlib.image import imread
 
 from dr_masonry import JointLaw, Load, PlasticDamage, Simulation, SolverOptions, Stage
 from dr_masonry.geometry import BrickSpec, add_wall, plane_nodes
@@ -23,6 +25,29 @@ def rocking_shear(n_base, length, thickness, height, ft=0.0):
     axial force at the base ``n_base`` (N, load and self-weight) and of a bed joint whose tensile
     strength ``ft`` (Pa) holds the whole base until it lets go."""
     return (n_base * length / 2 + ft * thickness * length ** 2 / 2) / height
+
+
+def saved_figures(monkeypatch, module):
+    """Record the figures that code creating them through ``module.Figure`` (``matplotlib.figure``,
+    or ``dr_masonry.viz.plots``, which imports it) saves: returns a dict, file name -> figure,
+    filled as they are saved; each figure keeps the dpi it was saved at as ``saved_dpi``."""
+    saved = {}
+
+    class Recorded(module.Figure):
+        def savefig(self, fname, *a, **k):
+            self.saved_dpi = k.get("dpi", self.dpi)
+            saved[str(fname)] = self
+            return super().savefig(fname, *a, **k)
+    monkeypatch.setattr(module, "Figure", Recorded)
+    return saved
+
+
+def pixels(png, fig, ax, xy):
+    """RGB colours (n, 3) of the saved picture ``png`` of recorded figure ``fig`` at the data
+    points ``xy`` (n, 2) of its axes ``ax``."""
+    img = imread(png)[..., :3]
+    p = ax.transData.transform(np.atleast_2d(xy)) * (fig.saved_dpi / fig.dpi)
+    return img[np.round(img.shape[0] - p[:, 1]).astype(int), np.round(p[:, 0]).astype(int)]
 
 
 @dataclasses.dataclass

@@ -11,6 +11,8 @@ from dr_masonry.loading import LoadingError
 from dr_masonry.params import ParameterError
 from dr_masonry.protocols import S6
 
+from conftest import saved_figures
+
 G = 9.81
 
 
@@ -148,18 +150,12 @@ def test_s7_reduced_cyclic_protocol(tmp_path, capsys, monkeypatch):
     from dr_masonry.postprocess import energy_per_cycle
     from dr_masonry.results import open_result
     from dr_masonry.viz import plots
-    saved, drawn = {}, {}      # the figures by their PNG, the frames of the maps by their PNG
-
-    class Recorded(plots.Figure):
-        def savefig(self, png, *a, **k):
-            saved[str(png)] = self
-            return super().savefig(png, *a, **k)
-    crack_map = plots.crack_map
+    saved = saved_figures(monkeypatch, plots)
+    drawn, crack_map = {}, plots.crack_map      # the frame of each map, by its PNG
 
     def recorded_map(result, frame, png, **kw):
         drawn[str(png)] = result.frame_increment(frame)
         return crack_map(result, frame, png, **kw)
-    monkeypatch.setattr(plots, "Figure", Recorded)
     monkeypatch.setattr(plots, "crack_map", recorded_map)
     out = tmp_path / "s7_cyclic"
     terraced_house.main(["fast=true", "protocol=cyclic", f"out={out}"])

@@ -14,7 +14,7 @@ from dr_masonry.study import grid, plot_overlay, run_study
 from matplotlib.colors import to_rgb
 from matplotlib.image import imread
 
-from conftest import rocking_shear
+from conftest import pixels, rocking_shear, saved_figures
 
 #: a fast squat wall with 4 push increments: a few seconds per variant
 BASE = dict(fast=True, increments=4)
@@ -51,7 +51,7 @@ def sync_study(tmp_path_factory):
                      verbose=False)
 
 
-def test_synchronous_study(sync_study):
+def test_synchronous_study(sync_study, monkeypatch):
     res = sync_study
     assert [r["status"] for r in res.rows] == ["ok", "ok"], res.table()
     ref, parb = res.rows
@@ -75,43 +75,36 @@ def test_synchronous_study(sync_study):
     assert [r["label"] for r in rows] == ["variant=reference", "variant=PAR_B"]
     assert rows[1]["param.variant"] == "PAR_B" and rows[1]["param.increments"] == "4"
     assert float(rows[1]["peak"]) == pytest.approx(parb["peak"])
-    assert_overlay_shows_the_curves(res)
+    assert_overlay_shows_the_curves(res, monkeypatch)
     assert "peak base shear (kN)" in res.table()
 
 
-def assert_overlay_shows_the_curves(res):
+def assert_overlay_shows_the_curves(res, monkeypatch):
     """The study's PNG is the overlay of its curves: drawn again (recording the figure) it is the
     same picture, and at each point of each curve, away from the curves drawn after it, the
     pixel has that curve's colour; the legend names the variants."""
     import matplotlib.figure
-    figs = []
-
-    class Recorded(matplotlib.figure.Figure):
-        def __init__(self, *a, **k):
-            super().__init__(*a, **k)
-            figs.append(self)
-    before = imread(res.png)[..., :3]
-    mp = pytest.MonkeyPatch()
-    with mp.context() as m:
-        m.setattr(matplotlib.figure, "Figure", Recorded)
-        plot_overlay(res)
-    img = imread(res.png)[..., :3]
-    assert np.array_equal(img, before)
-    ax, scale = figs[0].axes[0], 120 / figs[0].dpi      # plot_overlay saves at 120 dpi
+    before = imread(res.png)
+    saved = saved_figures(monkeypatch, matplotlib.figure)
+    plot_overlay(res)
+    assert np.array_equal(imread(res.png), before)
+    fig = saved[res.png]
+    ax = fig.axes[0]
     assert [t.get_text() for t in ax.get_legend().get_texts()] == [r["label"] for r in res.rows]
-    px = [ax.transData.transform(np.column_stack([r["x"], r["y"]])) * scale for r in res.rows]
+    xy = [np.column_stack([r["x"], r["y"]]) for r in res.rows]
+    px = [ax.transData.transform(p) for p in xy]     # display points of the figure
 
-    def distance(p, line):   # pixels from p to the polyline
+    def distance(p, line):   # from p to the polyline
         a, b = line[:-1], line[1:]
         t = np.clip(np.einsum("ij,ij->i", p - a, b - a) / np.einsum("ij,ij->i", b - a, b - a),
                     0, 1)
         return np.hypot(*(a + t[:, None] * (b - a) - p).T).min()
-    for k, (line, pts) in enumerate(zip(ax.get_lines(), px)):
-        seen = [p for p in pts if all(distance(p, later) > 4 for later in px[k + 1:])]
+    for k, line in enumerate(ax.get_lines()):
+        seen = [j for j, p in enumerate(px[k])
+                if all(distance(p, later) > 4 for later in px[k + 1:])]
         assert seen, f"curve {k} is hidden by the later ones"
-        for x, y in seen:
-            np.testing.assert_allclose(img[int(round(img.shape[0] - y)), int(round(x))],
-                                       to_rgb(line.get_color()), atol=0.05)
+        np.testing.assert_allclose(pixels(res.png, fig, ax, xy[k][seen]),
+                                   np.tile(to_rgb(line.get_color()), (len(seen), 1)), atol=0.05)
 
 
 def test_local_cluster_study_with_a_failing_variant(sync_study, tmp_path):

@@ -17,10 +17,12 @@ from dr_masonry.postprocess import PostprocessError, cycle_bounds, energy_per_cy
 from dr_masonry.protocols import S4, S5, S6, S7
 from dr_masonry.results import open_result, pack
 from dr_masonry.viz.plots import crack_map
+from matplotlib.colors import to_rgb
+from matplotlib.image import imread
 from dr_masonry.solver import increments
 
 import linear_reference as LR
-from conftest import rocking_shear
+from conftest import pixels, rocking_shear, saved_figures
 from interrupt import COMMIT, interrupt_after
 
 L, T, NC, HC = 0.88, 0.102, 10, 0.081
@@ -191,7 +193,7 @@ def test_energy_per_cycle(slender_cyclic):
         assert 0.0 <= c["xi_eq"] < 0.5
 
 
-def test_equivalent_damping_by_hand(tmp_path):
+def test_equivalent_damping_by_hand(tmp_path, monkeypatch):
     """One cycle 0 -> +2 -> -2 -> 0 mm, forces 15 and -14 kN at the peaks, 8 J dissipated:
     xi_eq = 8 / (pi (15e3 * 2e-3 + 14e3 * 2e-3)) = 0.04390; the table goes to CSV by finish()."""
     from dr_masonry.postprocess import cycle_text
@@ -227,11 +229,18 @@ def test_equivalent_damping_by_hand(tmp_path):
 
         def close(self):
             pass
+    from dr_masonry.viz import plots
+    from dr_masonry.viz.plots import PlotError, cycle_energy_plot
+    saved = saved_figures(monkeypatch, plots)
     out = str(tmp_path / "run")
     paths = finish(Run(), out, u, f, "u", "F", "t", vtk=False, cycles=[c])
     assert paths[-2:] == [out + "_cycles.csv", out + "_cycles.png"]
-    assert os.path.getsize(out + "_cycles.png") > 0
-    from dr_masonry.viz.plots import PlotError, cycle_energy_plot
+    # the cycle's bar: 6 J of the joints (red) under 2 J of the blocks (grey)
+    fig = saved[out + "_cycles.png"]
+    ax = fig.axes[0]
+    assert [(p.get_y(), p.get_height()) for p in ax.patches] == [(0.0, 6.0), (6.0, 2.0)]
+    np.testing.assert_allclose(pixels(out + "_cycles.png", fig, ax, [(1, 3.0), (1, 7.0)]),
+                               [to_rgb("tab:red"), to_rgb("0.4")], atol=0.02)
     for bad in ([], [{"cycle": 1}], "x"):
         with pytest.raises(PlotError, match="cycles must be the non-empty list"):
             cycle_energy_plot(bad, out + "_bad.png")
@@ -460,13 +469,25 @@ def test_replot_draws_a_stopped_run_without_running(tmp_path, monkeypatch):
     assert any("replot=true" in n for n in e.value.__notes__)
     assert not (tmp_path / "s5.csv").exists()
     monkeypatch.setattr(Simulation, "run", lambda *a: pytest.fail("replot ran the solver"))
+    import matplotlib.figure
+    saved = saved_figures(monkeypatch, matplotlib.figure)
+
+    def assert_curve(png, result):   # the base shear (kN) against the top (mm) of the push rows
+        (ax,) = saved[png].axes
+        curve = next(ln for ln in ax.get_lines() if ln.get_label().startswith("this run"))
+        push = result.history["increment"] > squat_wall.FAST["pre_increments"]
+        np.testing.assert_allclose(curve.get_xdata(), result.history["beam.ux"][push] * 1e3,
+                                   rtol=1e-12)
+        np.testing.assert_allclose(curve.get_ydata(), result.history["beam.fx"][push] * 1e-3,
+                                   rtol=1e-12)
+        assert push.sum() == 3 and imread(png).shape[:2] == (480, 720)   # 6 x 4 in, 120 dpi
     squat_wall.main(argv + ["replot=true"])
     r = open_result(str(out) + ".h5")
     assert r.n_history == 5
     csv = np.genfromtxt(str(out) + ".csv", delimiter=",", names=True)
     for key in ("increment", "beam.ux", "beam.fx"):
         np.testing.assert_array_equal(csv[key.replace(".", "")], r.history[key])
-    assert os.path.getsize(str(out) + ".png") > 0
+    assert_curve(str(out) + ".png", r)
     vtu = sorted(p.name for p in (tmp_path / "s5_vtk").glob("blocks_*.vtu"))
     assert vtu == [f"blocks_{i:06d}.vtu" for i in r.frame_ids] and len(vtu) >= 2
     assert open_result(str(out) + ".h5").n_history == 5   # untouched
@@ -474,7 +495,8 @@ def test_replot_draws_a_stopped_run_without_running(tmp_path, monkeypatch):
     pack(str(out) + ".h5", str(copy) + ".h5")
     with pytest.warns(RuntimeWarning, match=r"copy\.h5 has no frames: no VTK written"):
         squat_wall.main(argv[:3] + [f"out={copy}", "frames=2", "replot=true"])
-    assert os.path.getsize(str(copy) + ".png") > 0 and not (tmp_path / "copy_vtk").exists()
+    assert_curve(str(copy) + ".png", open_result(str(copy) + ".h5"))
+    assert not (tmp_path / "copy_vtk").exists()
     with pytest.raises(ParameterError, match="replot=true and resume=true"):
         squat_wall.main(argv + ["replot=true", "resume=true"])
     with pytest.raises(ParameterError, match=r"replot=true: .*s5\.h5 was run with drift=0\.03"):
@@ -542,8 +564,10 @@ def test_checkpoint_between_frames(tmp_path, monkeypatch):
     assert r.frame_ids == [2] and r.checkpoint()[0] == 6   # the increment before the interrupt
     # the state of the interrupted run can be drawn from its checkpoint
     assert r.frame_increment("checkpoint") == 6
+    from dr_masonry.viz import plots
+    saved = saved_figures(monkeypatch, plots)
     png = crack_map(r, "checkpoint", str(tmp_path / "ck.png"), threshold=0.0)
-    assert os.path.getsize(png) > 0
+    assert saved[png].axes[0].get_title() == "s5.h5: increment 6"
     monkeypatch.setattr(increments, "commit", COMMIT)
     sim, hist, _ = squat_wall.run(dict(params, resume=True))
     sim.close()
