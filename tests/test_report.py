@@ -12,8 +12,8 @@ from dr_masonry.results import ResultWriter, open_result
 from dr_masonry.viz import render
 from dr_masonry.viz.animate import animate
 from dr_masonry.viz.render import RenderError
-from dr_masonry.viz.report import scene_of, write_report
-from test_results import fake_fields, tiny_model
+from dr_masonry.viz.report import scene_of
+from conftest import fake_fields, tiny_model
 
 needs_vtk = pytest.mark.skipif(not render.vtk_offscreen_available(),
                                reason="no VTK offscreen rendering here")

@@ -37,8 +37,9 @@ DEFAULT_VIEWS = {"view": dict(camera="iso", field="dt")}
 ENERGIES = {"W_ext": "external work", "E_stored": "stored elastic energy",
             "D_blocks": "dissipated in the bricks (plastic damage)",
             "D_joints": "dissipated in the joints", "D_joint_damage": "joints: cohesive damage",
-            "D_joint_friction": "joints: friction", "E_damped": "absorbed by the relaxation's damping",
-            "E_kinetic": "kinetic energy left", "balance_error": "balance error (of the gross work)"}
+            "D_joint_friction": "joints: friction",
+            "E_damped": "absorbed by the relaxation's damping", "E_kinetic": "kinetic energy left",
+            "balance_error": "balance error (of the gross work)"}
 
 
 def scene_of(result, case=None):
