@@ -140,7 +140,7 @@ def _curve_arg(text):
 
 
 def _cmd_animate(args):
-    from dr_masonry.viz.animate import animate
+    from dr_masonry.viz.animation import animate
     print(animate(args.result, args.out, case=args.case, curve=_curve_arg(args.curve),
                   field=args.field, camera=args.camera, fps=args.fps))
     return 0

@@ -10,7 +10,7 @@ from PIL import Image
 from dr_masonry.cli import main
 from dr_masonry.results import ResultWriter, open_result
 from dr_masonry.viz import render
-from dr_masonry.viz.animate import animate
+from dr_masonry.viz.animation import animate
 from dr_masonry.viz.render import RenderError
 from dr_masonry.viz.report import scene_of
 from conftest import fake_fields, tiny_model
