@@ -150,7 +150,7 @@ def relax_args(sim, iters, alpha=1.0, ring=None):
     ring = sim.options.damping.ring if ring is None else ring
     crit = R.Criteria(0.0, float(sim.ref_floor), 0.0, 0.0, 10, 0, 0.5 * sim.size, 0.0, int(iters))
     return [sim.mesh, sim.cont, sim.dyn, np.zeros(1), np.zeros(3, dtype=np.int64), 1.0,
-            float(alpha), float(ring), crit, R.start_progress()]
+            float(alpha), float(ring), crit, R.start_progress(), R.no_constraint()]
 
 
 def check_ran(out):

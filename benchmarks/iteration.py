@@ -57,7 +57,7 @@ def child(params):
 
     def iterations():
         R.relax(m, c, d, sim.lam, np.zeros(3, np.int64), 1.0, o.damping.alpha, o.damping.ring,
-                crit, R.start_progress())
+                crit, R.start_progress(), R.no_constraint())
 
     def pieces(f):
         return lambda: [f() for _ in range(n)]

@@ -8,7 +8,7 @@ reference points, and run a list of :class:`Stage` objects of controls. Single-p
 from . import units
 from .model import Model, ModelError
 from .materials import JointLaw, PlasticDamage
-from .loading import (Displacement, Force, Load, Indirect, Stage, Gravity, BodyForce,
+from .loading import (Displacement, Force, Load, Indirect, Opening, Stage, Gravity, BodyForce,
                       Pressure, PointLoad, Combined, cyclic_path)
 from .options import SolverOptions
 from .solver import Simulation, SolverError
@@ -17,6 +17,6 @@ from .drivers_material import drive_material, drive_strain_path
 
 __version__ = "0.1.0"
 __all__ = ["units", "Model", "ModelError", "JointLaw", "PlasticDamage", "Displacement", "Force",
-           "Load", "Indirect", "Stage", "Gravity", "BodyForce", "Pressure", "PointLoad", "Combined",
+           "Load", "Indirect", "Opening", "Stage", "Gravity", "BodyForce", "Pressure", "PointLoad", "Combined",
            "cyclic_path", "Simulation", "SolverOptions", "SolverError", "drive_joint",
            "drive_material", "drive_strain_path"]

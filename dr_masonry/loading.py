@@ -237,6 +237,31 @@ class Indirect(_Control):
     dof: str = "x"
 
 
+@dataclass(eq=False)
+class Opening(_Control):
+    """Opening control (crack-opening control, de Borst 1987): the factor of ``pattern`` found so
+    that the mean displacement along ``dof`` of node set ``b`` minus that of node set ``a``
+    follows the target values (m), e.g. the two faces of a joint that opens. The opening is held
+    during each relaxation (a constraint the relaxation is projected onto) and the factor is
+    found by a secant iteration on the constraint's reaction, so that a softening branch that
+    turns back (a snap-back) is traced: docs/internals.md, "Decisions"."""
+    pattern: object = None
+    a: object = None
+    b: object = None
+    dof: str = "x"
+
+    def __post_init__(self):
+        super().__post_init__()
+        for side in ("a", "b"):
+            if not isinstance(getattr(self, side), NodeSet):
+                raise LoadingError(f"control {self.label}: {side} must be a NodeSet "
+                                   f"(Simulation.node_set), got {getattr(self, side)!r}")
+        if np.intersect1d(self.a.nodes, self.b.nodes).size:
+            raise LoadingError(f"control {self.label}: node sets {self.a.name!r} and "
+                               f"{self.b.name!r} share nodes")
+        dof_index(self.dof, rotations=False)
+
+
 #: the most increments one stage or protocol path may have: an increment relaxes in 10^2-10^5
 #: iterations of about a millisecond, so a million is at least a day's run; more is a typo or a
 #: step far too fine, and a path of 10^9 targets would not even fit in memory
@@ -297,9 +322,11 @@ class Stage:
         if not isinstance(self.controls, (list, tuple)) or not all(isinstance(c, _Control)
                                                                     for c in self.controls):
             raise LoadingError(f"stage {self.name!r}: controls must be a list of Displacement, "
-                               f"Force, Load and Indirect controls, got {self.controls!r}")
-        if sum(isinstance(c, Indirect) for c in self.controls) > 1:
-            raise LoadingError(f"stage {self.name!r}: at most one Indirect control per stage")
+                               f"Force, Load, Indirect and Opening controls, got "
+                               f"{self.controls!r}")
+        if sum(isinstance(c, (Indirect, Opening)) for c in self.controls) > 1:
+            raise LoadingError(f"stage {self.name!r}: at most one Indirect or Opening control per "
+                               f"stage")
 
 
 def check_stage(stage):

@@ -195,7 +195,8 @@ def relax_scheme(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, crit, p
         else:
             rp_residual(dyn, lam, rpres)
         if its % crit.check_every == 0 or its == 1:
-            status, ratio, rn, ref, rg, pr = check(cont, dyn, lam, rpres, crit, pr, its, it, last)
+            status, ratio, rn, ref, rg, pr = check(cont, dyn, lam, rpres, crit, pr, its, it, last,
+                                                   0.0)
             last = its
             if status == ST_NONFINITE:
                 qty, kind, worst = worst_place(dyn, lam)
@@ -266,6 +267,6 @@ def relax_scheme(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, crit, p
             break
     lam_arr[0] = lam
     out = finish(mesh, cont, dyn, lam, crit, status, it, rn, ref, rg, ke, damped, worst, kind,
-                 qty)
+                 qty, 0.0)
     return (out, Progress(seg + it, pr.n_over, pr.goal, pr.since, pr.best, pr.win_r, pr.win_n,
                           pr.win_d, pr.win_k), SchemeState(ke_prev, dt, a_mix, n_pos))

@@ -84,9 +84,22 @@ Progress = namedtuple("Progress", "seg n_over goal since best win_r win_n win_d 
 #: kinetic energy J and damped energy J of the call; stored energy J; the reference force N; the
 #: largest block imbalance ratio and its block; where, where_kind: the node, reference point or
 #: load factor a guard named (``WHERE_*``; unstable: the fastest node); quantity: the offending
-#: value (run-away displacement m, Rayleigh quotient, stalled ratio).
+#: value (run-away displacement m, Rayleigh quotient, stalled ratio); reaction: the force N of
+#: the held :data:`Constraint` at the last check (0 without one).
 Exit = namedtuple("Exit", "status iterations residual ratio kinetic damped stored ref "
-                          "block_ratio block where where_kind quantity")
+                          "block_ratio block where where_kind quantity reaction")
+#: a held linear combination of node displacements, sum_i coef[i] U[node[i], dof[i]] = target (m):
+#: at the start of a call the displacements and velocities are projected onto it in the metric
+#: of the masses, and every iteration the residual gets the constraint's force coef * reaction
+#: that leaves it no acceleration along the constraint (so the motion keeps it); ``Exit.reaction``
+#: (N) is that force's magnitude at the last check. An opening control (``loading.Opening``) holds a joint's opening
+#: this way. No entries: no constraint.
+Constraint = namedtuple("Constraint", "node dof coef target")
+
+
+def no_constraint():
+    """The :data:`Constraint` of an increment that holds nothing."""
+    return Constraint(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), 0.0)
 
 
 def start_progress():
@@ -107,14 +120,18 @@ def reachable_decrease(d, d_prev, windows):
 
 
 @jit
-def check(cont, dyn, lam, rpres, crit, pr, its, it, last):
+def check(cont, dyn, lam, rpres, crit, pr, its, it, last, fc):
     """The convergence check of span iteration ``its`` (call iteration ``it``; ``last``: the span
-    iteration of the previous check), after the residual at factor ``lam`` was formed.
+    iteration of the previous check), after the residual at factor ``lam`` was formed; ``fc`` N:
+    the norm of a held constraint's force, which counts in the reference as a support's reaction
+    does (0: none).
 
     Returns (status: ST_MAXITER to go on, the ratio counted against tol, rn and ref N: the norms
     of :func:`balance.norms`, the resultant's ratio scaled onto tol, the updated
     :data:`Progress`)."""
     rn, ref = norms(dyn, lam, rpres)
+    if fc > 0.0:
+        ref = np.sqrt(ref * ref + fc * fc)
     if not (np.isfinite(rn) and np.isfinite(lam)):
         return ST_NONFINITE, np.nan, rn, ref, 0.0, pr
     tol = crit.tol
@@ -282,7 +299,46 @@ def fastest_node(dyn):
 
 
 @jit
-def finish(mesh, cont, dyn, lam, crit, status, it, rn, ref, rg, ke, damped, worst, kind, qty):
+def hold(dyn, con):
+    """Project ``dyn.U`` and ``dyn.V`` onto the :data:`Constraint` ``con`` (mass metric)."""
+    m = con.node.shape[0]
+    if m == 0:
+        return
+    q, qv, s = 0.0, 0.0, 0.0
+    for k in range(m):
+        i, d, c = con.node[k], con.dof[k], con.coef[k]
+        q += c * dyn.U[i, d]
+        qv += c * dyn.V[i, d]
+        s += c * c * dyn.minv[i]
+    for k in range(m):
+        i, d, c = con.node[k], con.dof[k], con.coef[k]
+        dyn.U[i, d] += c * dyn.minv[i] * (con.target - q) / s
+        dyn.V[i, d] -= c * dyn.minv[i] * qv / s
+
+
+@jit
+def constraint_force(dyn, con):
+    """Add the :data:`Constraint`'s force to ``dyn.res``: the multiple ``reaction`` of ``coef``
+    that leaves the residual without acceleration along it; returns (``reaction`` N, the norm
+    of the force, N)."""
+    m = con.node.shape[0]
+    if m == 0:
+        return 0.0, 0.0
+    num, s, cc = 0.0, 0.0, 0.0
+    for k in range(m):
+        i, d, c = con.node[k], con.dof[k], con.coef[k]
+        num += c * dyn.minv[i] * dyn.res[i, d]
+        s += c * c * dyn.minv[i]
+        cc += c * c
+    mu = -num / s
+    for k in range(m):
+        dyn.res[con.node[k], con.dof[k]] += con.coef[k] * mu
+    return mu, abs(mu) * np.sqrt(cc)
+
+
+@jit
+def finish(mesh, cont, dyn, lam, crit, status, it, rn, ref, rg, ke, damped, worst, kind, qty,
+           mu):
     """The :data:`Exit` of a call that ran ``it`` iterations (shared with
     :mod:`.damping_schemes`)."""
     eint = stored_energy(mesh, cont) if it > 0 else 0.0
@@ -293,11 +349,11 @@ def finish(mesh, cont, dyn, lam, crit, status, it, rn, ref, rg, ke, damped, wors
         ratio = max(ratio, crit.tol * block / crit.block_tol)
     if crit.gap_tol > 0.0:
         ratio = max(ratio, rg)
-    return Exit(status, it, resid, ratio, ke, damped, eint, ref, block, at, worst, kind, qty)
+    return Exit(status, it, resid, ratio, ke, damped, eint, ref, block, at, worst, kind, qty, mu)
 
 
 @jit
-def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, alpha, ring, crit, pr):
+def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, alpha, ring, crit, pr, con):
     """Iterate one load increment to rest; returns (:data:`Exit`, the :data:`Progress` to pass
     to the next call of the increment, its ``seg`` counted on).
 
@@ -325,6 +381,7 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, alpha, ring, crit, pr):
         sticking under a slab, or chattering at a crack) dominates it.
     crit : :data:`Criteria`
     pr : :data:`Progress`
+    con : :data:`Constraint` (``no_constraint()``: none)
     """
     n = dyn.U.shape[0]
     nr = dyn.rpX.shape[0]
@@ -349,7 +406,9 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, alpha, ring, crit, pr):
         dyn.ring[:] = 0.0
     hbuf = mesh.fbuf.reshape((-1, 3))
     parts = np.zeros(((n + NODE_CHUNK - 1) // NODE_CHUNK, 4))   # per-task sums of the node passes
+    mu = 0.0
     place_rigid_nodes(dyn)
+    hold(dyn, con)
     for it in range(1, crit.max_iter + 1):
         its = seg + it   # iteration of the span
         # forces, then one pass over the nodes: gathered forces, residual, the Rayleigh sums
@@ -358,13 +417,15 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, alpha, ring, crit, pr):
         # (the node residuals at the new factor are formed where they are read next: below when
         # the whole residual is needed before the update, else in ``update_nodes``)
         lam = control_factor(dyn, lam, ctrl, ctrl_pc, rpres)
+        mu, fc = constraint_force(dyn, con)   # (no constraint: nothing)
         whole = its % crit.check_every == 0 or its == 1
         if whole:   # a check: the whole residual at the new factor before the node update
             if ctrl[0] != 0:
                 residual(dyn, lam, rpres)
             else:
                 rp_residual(dyn, lam, rpres)
-            status, ratio, rn, ref, rg, pr = check(cont, dyn, lam, rpres, crit, pr, its, it, last)
+            status, ratio, rn, ref, rg, pr = check(cont, dyn, lam, rpres, crit, pr, its, it, last,
+                                                   fc)
             last = its
             if status == ST_NONFINITE:
                 qty, kind, worst = worst_place(dyn, lam)
@@ -402,6 +463,6 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, alpha, ring, crit, pr):
             break
     lam_arr[0] = lam
     out = finish(mesh, cont, dyn, lam, crit, status, it, rn, ref, rg, ke, damped, worst, kind,
-                 qty)
+                 qty, mu)
     return out, Progress(seg + it, n_over, pr.goal, pr.since, pr.best, pr.win_r, pr.win_n,
                          pr.win_d, pr.win_k)

@@ -118,7 +118,7 @@ def relax_call(sim, scheme, alpha, tol, iters, stall, pr=None, state=None, check
     pr = R.start_progress() if pr is None else pr
     args = (sim.mesh, sim.cont, sim.dyn, np.zeros(1), np.zeros(3, np.int64), 1.0)
     if scheme == "viscous":
-        return R.relax(*args, float(alpha), float(ring), crit, pr) + (None,)
+        return R.relax(*args, float(alpha), float(ring), crit, pr, R.no_constraint()) + (None,)
     code = SCHEMES[scheme]
     state = D.start_state(code, alpha) if state is None else state
     return D.relax_scheme(*args, code, float(alpha), crit, pr, state)

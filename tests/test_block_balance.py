@@ -85,7 +85,7 @@ def test_solver_option_parameters_default_to_the_solver_defaults():
 def test_a_block_far_out_of_balance_is_named_once(tmp_path):
     sim, _ = _fast_wall(tmp_path, 0.0)
     out = R.Exit(R.ST_CONVERGED, 100, 1e-5, 1e-5, 0.0, 0.0, 0.0, 1.0,
-                 0.9 * BLOCK_IMBALANCE_WARN, 7, 0, 0, 0.0)
+                 0.9 * BLOCK_IMBALANCE_WARN, 7, 0, 0, 0.0, 0.0)
     assert check_block_balance(sim, out) == 0.9 * BLOCK_IMBALANCE_WARN   # below: silent
     out = out._replace(block_ratio=1.2 * BLOCK_IMBALANCE_WARN)
     with pytest.warns(RuntimeWarning, match="block 7 is out of balance by 60%"):

@@ -533,3 +533,36 @@ def test_quad_dshape_is_the_derivative_of_quad_shape():
         fd_s = (np.array(quad_shape(r, s + h)) - np.array(quad_shape(r, s - h))) / (2 * h)
         np.testing.assert_allclose(dr, fd_r, rtol=0, atol=1e-11)
         np.testing.assert_allclose(ds, fd_s, rtol=0, atol=1e-11)
+
+
+# ------------------------------------------------------------------ 4. held constraint
+def test_constraint_force_and_hold_against_numpy():
+    """``constraint_force`` adds c mu to the residual with mu = -c.M^-1 r / c.M^-1 c (so that
+    M^-1 (r + c mu) has no component along c), and ``hold`` moves U and V onto c.U = target,
+    c.V = 0 along M^-1 c; no entries: nothing changes."""
+    rng = np.random.default_rng(3)
+    d = _dyn(6, 0, 0)
+    d.minv[:] = rng.uniform(0.5, 2.0, 6)
+    d.res[:] = rng.normal(size=(6, 3))
+    d.U[:] = rng.normal(size=(6, 3))
+    d.V[:] = rng.normal(size=(6, 3))
+    con = R.Constraint(np.array([1, 4, 5]), np.array([0, 0, 2]), np.array([-0.5, 0.25, 0.25]),
+                       0.3)
+    c = np.zeros((6, 3))
+    c[con.node, con.dof] = con.coef
+    mi = d.minv[:, None]
+    mu = -(c * mi * d.res).sum() / (c * c * mi).sum()
+    expect = d.res + c * mu
+    got, norm = R.constraint_force(d, con)
+    assert got == pytest.approx(mu, rel=1e-12)
+    assert norm == pytest.approx(abs(mu) * np.linalg.norm(con.coef), rel=1e-12)
+    np.testing.assert_allclose(d.res, expect, rtol=1e-12, atol=1e-14)
+    assert abs((c * mi * d.res).sum()) < 1e-12
+    R.hold(d, con)
+    assert (c * d.U).sum() == pytest.approx(0.3, abs=1e-12)
+    assert abs((c * d.V).sum()) < 1e-12
+    before = (d.U.copy(), d.res.copy())
+    assert R.constraint_force(d, R.no_constraint()) == (0.0, 0.0)
+    R.hold(d, R.no_constraint())
+    np.testing.assert_array_equal(d.U, before[0])
+    np.testing.assert_array_equal(d.res, before[1])

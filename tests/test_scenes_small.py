@@ -125,8 +125,8 @@ def test_unconverged_increment_is_cut_and_accounted(monkeypatch):
     from dr_masonry.solver import relaxing
     real = relaxing.relax_increment
 
-    def stalling(sim, ctrl, pc, tol, max_iter, stall):
-        out = real(sim, ctrl, pc, tol, max_iter, stall)
+    def stalling(sim, ctrl, pc, tol, max_iter, stall, con=None):
+        out = real(sim, ctrl, pc, tol, max_iter, stall, con)
         return out._replace(status=R.ST_STALLED) if stall > 0 else out
 
     sim, stages = couplet.build(dict(couplet.PARAMS, h5=None))

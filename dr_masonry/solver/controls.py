@@ -68,6 +68,8 @@ def key(ctl):
         t = ctl.target   # a RigidPoint or NodeSet: checked when the control was made
         return (type(ctl).__name__ == "Force", t.name,
                 L.dof_index(ctl.dof, isinstance(t, L.RigidPoint)))
+    if isinstance(ctl, L.Opening):
+        return ("opening", ctl.a.name, ctl.b.name, L.dof_index(ctl.dof, rotations=False))
     return ("load", ctl.pattern.name)
 
 
@@ -88,14 +90,16 @@ def check_controls(sim, stage):
                                      f"{sim.model.node_block[held[0]]}) is fixed in "
                                      f"{ctl.dof} (a fixed block or Simulation.fix): a "
                                      f"non-zero prescribed displacement would move a support")
+        if isinstance(ctl, L.Opening):
+            check_opening(sim, ctl)
         if isinstance(ctl, L.Load):
             P, rpP = pattern_forces(sim, ctl.pattern)
             if not (np.any(P[~sim._fixed]) or np.any(rpP)):
                 raise L.LoadingError(f"control {ctl.label}: pattern {ctl.pattern.name!r} "
                                      f"puts no force on any free DOF (its blocks, faces or "
                                      f"nodes are fixed, or it is empty)")
-        acts = [key(ctl)[1:]]    # (target, dof) or (pattern,)
-        if isinstance(ctl, L.Indirect):
+        acts = [key(ctl)[1:]]    # (target, dof), (pattern,) or (set, set, dof)
+        if isinstance(ctl, (L.Indirect, L.Opening)):
             acts.append((ctl.pattern.name,))
         for what in acts:
             if what in seen:
@@ -104,6 +108,38 @@ def check_controls(sim, stage):
                 raise L.LoadingError(f"stage {stage.name!r}: controls {seen[what].label} and "
                                      f"{ctl.label} both act on {on}")
             seen[what] = ctl
+
+
+def check_opening(sim, ctl):
+    """LoadingError unless the node sets of Opening ``ctl`` are this simulation's, free in its
+    DOF (not fixed, not tied to a rigid point), and its pattern loads a free DOF; and unless the
+    damping is viscous (the held constraint is in that loop only)."""
+    k = L.dof_index(ctl.dof, rotations=False)
+    for side in (ctl.a, ctl.b):
+        own(sim, side, f"control {ctl.label}")
+        held = side.nodes[sim._fixed[side.nodes, k] | (sim.dyn.tied[side.nodes] >= 0)]
+        if held.size:
+            raise L.LoadingError(f"control {ctl.label}: node {held[0]} of {side.name!r} is fixed "
+                                 f"or tied to a rigid point in {ctl.dof}: an opening control "
+                                 f"moves its nodes")
+    if sim.options.damping.scheme != "viscous":
+        raise L.LoadingError(f"control {ctl.label}: an opening control needs damping='viscous', "
+                             f"not {sim.options.damping.scheme!r}")
+    P, rpP = pattern_forces(sim, ctl.pattern)
+    if not (np.any(P[~sim._fixed]) or np.any(rpP)):
+        raise L.LoadingError(f"control {ctl.label}: pattern {ctl.pattern.name!r} puts no force on "
+                             f"any free DOF")
+
+
+def constraint(sim, ctl, target):
+    """The ``R.Constraint`` holding Opening ``ctl`` at ``target`` m: the mean displacement of
+    ``ctl.b`` minus that of ``ctl.a`` along its DOF."""
+    from ..kernels.relaxation import Constraint
+    k = L.dof_index(ctl.dof, rotations=False)
+    a, b = ctl.a.nodes, ctl.b.nodes
+    node = np.concatenate([a, b]).astype(np.int64)
+    coef = np.concatenate([np.full(a.size, -1.0 / a.size), np.full(b.size, 1.0 / b.size)])
+    return Constraint(node, np.full(node.size, k, np.int64), coef, float(target))
 
 
 def own(sim, target, what):
@@ -146,6 +182,8 @@ def apply(sim, ctl, value):
     elif isinstance(ctl, L.Load):
         pattern_forces(sim, ctl.pattern)
         sim.factors[ctl.pattern.name] = value
+    elif isinstance(ctl, L.Opening):   # held by the relaxation (``constraint``)
+        pattern_forces(sim, ctl.pattern)
 
 
 def assemble_loads(sim, indirect):
@@ -197,9 +235,11 @@ def control_dof(sim, indirect):
 
 
 def release(sim, indirect):
-    """At the end of a stage with an indirect control: the pattern keeps its last factor, the
-    controlled DOF is released."""
+    """At the end of a stage with an indirect or opening control: the pattern keeps its last
+    factor, an indirectly controlled DOF is released."""
     sim.factors[indirect.pattern.name] = float(sim.lam[0])
+    if isinstance(indirect, L.Opening):
+        return
     t = indirect.target
     k = L.dof_index(indirect.dof, isinstance(t, L.RigidPoint))
     if isinstance(t, L.RigidPoint):
@@ -219,16 +259,16 @@ def drive(sim, moved, indirect):
     d.grp[:] = 0.0
     d.gspec[:] = 0.0
     for ctl in moved:
-        if not isinstance(ctl, (L.Displacement, L.Indirect)):
+        if not isinstance(ctl, (L.Displacement, L.Indirect, L.Opening)):
             continue
-        rigid = isinstance(ctl.target, L.RigidPoint)
+        rigid = isinstance(getattr(ctl, "target", None), L.RigidPoint)
         k = L.dof_index(ctl.dof, rigid)
         if k >= 3:
             continue
         d.gspec[0, k] = 1.0
         past = np.asarray(sim.history.get(f"drive.f{'xyz'[k]}", []))
         d.gspec[1, k] = np.nanmax(np.abs(past), initial=0.0)
-        if ctl is indirect:
+        if ctl is indirect:   # (an Indirect or Opening drives by its pattern)
             continue
         if rigid:
             d.grp[ctl.target.index, k] = 1.0

@@ -9,7 +9,7 @@ import numpy as np
 
 from . import certificate as cert
 from . import controls as C
-from .relaxing import relax_increment
+from .relaxing import relax_increment, relax_opening
 from .rows import commit
 
 #: the predictor does not continue the motion of a block that an accepted increment leaves out of
@@ -30,7 +30,7 @@ def run_stage(sim, stage, where, first=0, starts=None):
         key = C.key(ctl)
         start = starts.setdefault(key, sim.values.get(key, 0.0))
         targets[key] = (ctl, ctl.values(start, n))
-        if isinstance(ctl, C.L.Indirect):
+        if isinstance(ctl, (C.L.Indirect, C.L.Opening)):
             indirect = ctl
             if first == 0 and sim.factors.get(ctl.pattern.name) is not None:
                 sim.lam[0] = sim.factors[ctl.pattern.name]
@@ -66,9 +66,13 @@ def increment(sim, stage, targets, goal, indirect, depth, parent_diss=None):
     ctrl, pc, dctl = _set_up(sim, targets, goal, start, indirect, snap[0])
     max_iter = stage.max_iter or inc.max_iter
     tol = stage.tol or sim.options.convergence.tol
+    stall = inc.stall_iter if depth < inc.max_cuts else 0
     t0 = time.perf_counter()
-    out = relax_increment(sim, ctrl, pc, tol, max_iter,
-                          inc.stall_iter if depth < inc.max_cuts else 0)
+    if isinstance(indirect, C.L.Opening):
+        key = C.key(indirect)
+        out = relax_opening(sim, C.constraint(sim, indirect, goal[key]), tol, max_iter, stall)
+    else:
+        out = relax_increment(sim, ctrl, pc, tol, max_iter, stall)
     elapsed = time.perf_counter() - t0
     failed = cert.failure(sim, stage, out)
     if failed:
@@ -109,7 +113,7 @@ def _set_up(sim, targets, goal, start, indirect, u_before):
     C.assemble_loads(sim, indirect)
     ctrl = np.zeros(3, dtype=np.int64)
     pc = 1.0
-    if indirect is not None:
+    if isinstance(indirect, C.L.Indirect):
         ctrl[:], pc = C.control_dof(sim, indirect)
     # predictor: continue the previous increment's motion when the control keeps its direction
     dctl = sum(goal[k] - start[k] for k in goal)

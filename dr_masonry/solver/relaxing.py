@@ -37,14 +37,15 @@ def threads_for(n_nodes):
         numba.set_num_threads(threads)
 
 
-def _loop(damping):
+def _loop(damping, con):
     """``loop(mesh, cont, dyn, lam, ctrl, pc, crit, pr, state) -> (Exit, Progress, state)`` for
-    the scheme ``damping`` (a :class:`~dr_masonry.options.Damping`); the other schemes' module is
-    imported (and compiled) only by a run that uses one."""
+    the scheme ``damping`` (a :class:`~dr_masonry.options.Damping`) and the held constraint
+    ``con`` (viscous damping only); the other schemes' module is imported (and compiled) only by
+    a run that uses one."""
     if damping.scheme == "viscous":
         def loop(mesh, cont, dyn, lam, ctrl, pc, crit, pr, state):
             return R.relax(mesh, cont, dyn, lam, ctrl, pc, damping.alpha, damping.ring, crit,
-                           pr) + (state,)
+                           pr, con) + (state,)
         return loop, None
     from ..kernels import damping_schemes as D
     code = {"kinetic": D.DAMP_KINETIC, "local": D.DAMP_LOCAL, "fire": D.DAMP_FIRE}[damping.scheme]
@@ -55,9 +56,9 @@ def _loop(damping):
     return loop, D.start_state(code, damping.alpha)
 
 
-def relax_increment(sim, ctrl, pc, tol, max_iter, stall):
+def relax_increment(sim, ctrl, pc, tol, max_iter, stall, con=None):
     """Relax the increment set up on ``sim``'s arrays; returns its ``R.Exit`` with the attempt's
-    iterations and damped energy J.
+    iterations and damped energy J. ``con``: an ``R.Constraint`` to hold (None: none).
 
     With ``sim.use_coarse``, in spans of ``coarse_every`` iterations (doubled after a rejected
     correction and after the tenth of an increment, up to 64 x; none after two rejections in a
@@ -69,7 +70,7 @@ def relax_increment(sim, ctrl, pc, tol, max_iter, stall):
     """
     o, d = sim.options, sim.dyn
     c, k = o.convergence, o.coarse
-    loop, state = _loop(o.damping)
+    loop, state = _loop(o.damping, R.no_constraint() if con is None else con)
     rejected = 0 if sim.use_coarse else 2
     if sim.use_coarse:
         if sim.coarse is None:
@@ -115,3 +116,43 @@ def relax_increment(sim, ctrl, pc, tol, max_iter, stall):
             if out.status != R.ST_MAXITER or done >= max_iter:
                 return total
             sim.progress.working(sim, out.residual, done)
+
+
+#: secant steps on the load factor of an opening control before the attempt counts as stalled
+SECANT_STEPS = 12
+
+
+def relax_opening(sim, con, tol, max_iter, stall):
+    """Relax an increment of an opening control: hold the constraint ``con`` (``R.Constraint``)
+    and find the factor ``sim.lam`` of the control's pattern at which the constraint carries no
+    force, by a secant iteration on its reaction, each step one relaxation from the last one's
+    state (docs/internals.md, "Decisions"). Returns the last relaxation's ``R.Exit`` with the
+    increment's iterations and damped energy; a secant that does not bring the reaction within
+    ``tol`` x the reference force in ``SECANT_STEPS`` steps ends as ``ST_STALLED``.
+
+    The first trial is the factor the increment starts with; the second steps it by the secant
+    slope of the previous increment (``sim.opening_slope``, reaction N per unit factor) or, at
+    the first increment, by the reaction over the pattern's total force."""
+    ctrl = np.zeros(3, dtype=np.int64)
+    done, damped = 0, 0.0
+    lam_a, mu_a = None, None
+    for step in range(SECANT_STEPS):
+        out = relax_increment(sim, ctrl, 1.0, tol, max_iter, stall, con)
+        done += out.iterations
+        damped += out.damped
+        total = out._replace(iterations=done, damped=damped)
+        if out.status != R.ST_CONVERGED:
+            return total
+        lam_b, mu_b = float(sim.lam[0]), out.reaction
+        if abs(mu_b) <= tol * out.ref:
+            return total
+        if lam_a is None or mu_b == mu_a:
+            slope = sim.opening_slope
+            if slope is None or slope == 0.0:
+                slope = -(np.abs(sim.dyn.P).sum() + np.abs(sim.dyn.rpP).sum())
+        else:
+            slope = (mu_b - mu_a) / (lam_b - lam_a)
+            sim.opening_slope = slope
+        lam_a, mu_a = lam_b, mu_b
+        sim.lam[0] = lam_b - mu_b / slope
+    return total._replace(status=R.ST_STALLED)

@@ -199,6 +199,7 @@ class Simulation:
         self.energy = EnergyAccount(n)
         self.du_prev = None
         self.dctl_prev = 0.0
+        self.opening_slope = None   # opening control: reaction N per unit factor (secant)
         self.writer = None
         if self.output is not None:
             make_folder(os.path.dirname(os.path.abspath(self.output)))
@@ -243,10 +244,12 @@ class Simulation:
         for stage in stages:  # register every prescribed node set so history columns stay fixed
             controls.check_controls(self, stage)
             for ctl in stage.controls:
-                if (isinstance(ctl, (L.Displacement, L.Indirect))
-                        and isinstance(ctl.target, L.NodeSet)):
+                sets = ([ctl.target] if isinstance(ctl, (L.Displacement, L.Indirect))
+                        and isinstance(ctl.target, L.NodeSet) else
+                        [ctl.a, ctl.b] if isinstance(ctl, L.Opening) else [])
+                for side in sets:   # (an Opening: the two sides' mean displacements)
                     k = L.dof_index(ctl.dof, rotations=False)
-                    self.presc[(ctl.target.name, k)] = (ctl.target.nodes, k)
+                    self.presc[(side.name, k)] = (side.nodes, k)
         k0, i0, starts = (checkpoint.resume_position(self, stages) if self._resuming
                           else (0, 0, None))
         self._resuming = False
