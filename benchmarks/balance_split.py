@@ -9,7 +9,7 @@ history column ``balance_error`` times the gross work). It is split into points 
 changed sign within the row (opened from compression, or closed) and the others: at the kink of
 the normal law (penalty kc closed, (1 - D) knn open) the trapezoidal rule's work minus the
 energy the point stores is ``0.5 (k_before - k_after) u0 u1``, negative for an opening point,
-positive for a closing one, O(step^2) each (BENCHMARKS.md section 32). The same with the
+positive for a closing one, O(step^2) each. The same with the
 points' nodal forces and displacements (which also counts the turning of their frames), the
 hexahedra's share, and the work of the out-of-balance forces left at convergence add up to the
 row's balance error.
@@ -109,7 +109,7 @@ def main(argv=None):
     case = importlib.import_module(f"dr_masonry.cases.{params['scene']}")
     p = scene_params(case.PARAMS, case.FAST, params["args"].split(), case.__doc__)
     p.update(h5=None, progress=False)
-    sim, stages = case.build(p)
+    sim, stages = case.build(p)[:2]   # a scene with its own data returns it third
     out = split_rows(sim, stages, params["rows"])
     total, cross, nodal, blocks, resw = (sum(r[k] for r in out) for k in (
         "joints", "crossing", "joints_nodal", "blocks", "residual"))

@@ -1,5 +1,5 @@
-"""What one sparse direct solve of a scene's stiffness costs on this machine (BENCHMARKS.md
-section 65): the price per factorization that an implicit (Newton) solver of the same model would
+"""What one sparse direct solve of a scene's stiffness costs on this machine (BENCHMARKS.md, "The
+cost of a direct solve"): the price per factorization that an implicit (Newton) solver of the same model would
 pay, against the run time of the relaxation.
 
 Builds scene ``scene`` (its ``args``, e.g. ``mesh=fine``) without running it and assembles the

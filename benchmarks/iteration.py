@@ -12,7 +12,7 @@ residual, damping and update passes over the nodes and the serial remainder, BEN
 pristine elements' skip switched off); ``hexahedra`` and ``contacts``: the two halves of the force
 kernel alone (the other set empty), also per hexahedron and per contact point. Every (threads,
 policy) setting runs in a process of its own, since OpenMP reads ``OMP_WAIT_POLICY`` when it starts.
-BENCHMARKS.md sections 16 and 38.
+docs/internals.md, "Decisions".
 
 Run: ``python benchmarks/iteration.py [threads=1,2 policies=PASSIVE,ACTIVE rows=8 mesh=coarse
 iters=400 repeats=15 file= scene= tag=]`` (about 1 min per setting); writes
@@ -101,7 +101,7 @@ def wall_state(rows, mesh):
     from dr_masonry import Stage
     p = dict(squat_wall.PARAMS, mesh=mesh, h5=None, progress=False,
              out=os.path.join(ROOT, "benchmarks", "out", "iteration"))
-    sim, stages = squat_wall.build(p)
+    sim, stages, _ = squat_wall.build(p)
     push = stages[1].controls[0]
     push.path = push.path[:rows]
     sim.run([stages[0], Stage("push", rows, [push], frames=1000)])

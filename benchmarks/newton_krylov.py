@@ -1,5 +1,5 @@
 """Is the out-of-balance force of a creeping increment differentiable, and what does a
-matrix-free Newton-Krylov step do there? (BENCHMARKS.md section 52)
+matrix-free Newton-Krylov step do there? (docs/internals.md, "Decisions")
 
 Runs scene ``scene`` (default: the main job, S5 coarse mesh) to row ``row`` and, once its
 relaxation has run ``at`` iterations (at the end of the compiled call that passes them), freezes

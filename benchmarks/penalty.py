@@ -29,7 +29,7 @@ the coarse 4.0 m squat wall of the main job to ``s5_drift`` % drift in ``s5_incr
 increments (slow: minutes per factor). Each setting runs in a process of its own.
 
 Run: ``python benchmarks/penalty.py [factors=3,10,30,100 scenes=s2,s5fast,s6fast]``
-(about 10 min); writes ``benchmarks/out/penalty<tag>.csv`` and ``.png``. BENCHMARKS.md section 18.
+(about 10 min); writes ``benchmarks/out/penalty<tag>.csv`` and ``.png``. docs/internals.md, "Decisions".
 """
 import json
 import os
@@ -72,14 +72,14 @@ def build(params):
             p.update(squat_wall.FAST, fast=True)
         else:
             p.update(drift=params["s5_drift"], increments=params["s5_increments"])
-        sim, stages = squat_wall.build(p)
+        sim, stages, _ = squat_wall.build(p)
         return sim, stages, "beam.ux", "beam.fx", 1.0, "push"
     if scene == "s6fast":
         from dr_masonry.cases import out_of_plane_wall
         p = dict(out_of_plane_wall.PARAMS, **out_of_plane_wall.FAST, fast=True, h5=None,
                  progress=False)
         p["increments"] = params["s6_increments"]
-        sim, stages = out_of_plane_wall.build(p)
+        sim, stages, _ = out_of_plane_wall.build(p)
         return sim, stages, "centre.uy", "lambda", 1.0, "push"
     raise ParameterError(f"parameter scene={scene!r}: valid values are s2, s5fast, s6fast, s5")
 

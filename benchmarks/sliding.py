@@ -7,7 +7,7 @@ the case of almost every increment), best and mean of ``repeat`` calls, and repo
 model size. Compare with the seconds an increment of the same scene takes (BENCHMARKS.md).
 
 Run: ``python benchmarks/sliding.py [scenes=s5,s5fine,s7 repeat=5 noise=1e-4]`` (about 1 min);
-writes ``benchmarks/out/sliding.csv``. BENCHMARKS.md section 21.
+writes ``benchmarks/out/sliding.csv``. BENCHMARKS.md, "Finite-sliding check per increment".
 """
 import time
 
@@ -28,7 +28,7 @@ def row(name, repeat, noise):
         raise ParameterError(f"parameter scenes: {name!r} is not one of {sorted(SCENES)}")
     case, extra = SCENES[name]
     mod = import_case(case)
-    sim, _ = mod.build(dict(mod.PARAMS, h5=None, **extra))
+    sim = mod.build(dict(mod.PARAMS, h5=None, **extra))[0]
     sim.build()
     sim.dyn.U[:] = noise * np.random.default_rng(0).standard_normal(sim.dyn.U.shape)
     moved = sim.sliding.update()

@@ -22,7 +22,7 @@ The relaxation runs in calls of ``check_every`` = 1 iteration from the start (th
 those of the stored run; an attempt may stop up to 9 iterations earlier than it would have with
 checks every 10). Run: ``python benchmarks/slow_increment.py file=results/terraced_house.h5
 scene=terraced_house [rows=1 probe=20000 trace=60 window=2000]``; writes ``benchmarks/out/
-slow_increment.csv`` (residual ratio per call). BENCHMARKS.md sections 25 and 64.
+slow_increment.csv`` (residual ratio per call).
 """
 import numpy as np
 

@@ -197,8 +197,8 @@ class BlockCoarse:
             # traction such a point stays elastic: a slip increment ds across it turns the
             # traction on the yield circle, by kss ds to first order (the law's radial return).
             # With the secant everywhere, most post-peak S5 increments gave the correction up
-            # after two rejections (BENCHMARKS.md section 22); with the secant in every
-            # tangential direction, coarse steps carried cracked walls out of plane (section 50)
+            # after two rejections; with the secant in every
+            # tangential direction, coarse steps carried cracked walls out of plane
             slip = np.hypot(gap[:, 1], gap[:, 2])
             moving = ((c.s_new[:, JS_D] > c.s_old[:, JS_D]) | (c.s_new[:, JS_DP1] != c.s_old[:, JS_DP1])
                       | (c.s_new[:, JS_DP2] != c.s_old[:, JS_DP2])) & (slip > 1e-12)
@@ -329,7 +329,7 @@ class BlockCoarse:
         A = (A + sp.diags(1e-10 * dg + 1e-14 * dg.max())).tocsc()
         try:
             # A is symmetric positive definite: symmetric ordering, no pivoting (half the fill
-            # and factorisation time of the default column ordering, BENCHMARKS.md section 28)
+            # and factorisation time of the default column ordering)
             solve = spla.splu(A, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
                               options=dict(SymmetricMode=True)).solve
         except RuntimeError:

@@ -2,7 +2,7 @@
 
 Numba compiles a function and everything it calls in one thread, so the first run after an
 install or an edit of ``kernels/`` spends about a minute compiling ``relax`` and its callees
-(BENCHMARKS.md section 37), one core busy and the other idle. The callees of ``relax`` fall
+(BENCHMARKS.md, "Cold and warm start"), one core busy and the other idle. The callees of ``relax`` fall
 into two groups of similar cost, compiled side by side when their cache entries are missing:
 
 * the fused force kernel (``element_and_contact_forces``, with the return mapping and the joint
@@ -11,7 +11,7 @@ into two groups of similar cost, compiled side by side when their cache entries 
 * the node passes and the small helpers, in this process meanwhile.
 
 ``relax`` itself then compiles here with every callee in memory or loaded from the cache
-(BENCHMARKS.md section 39). Nothing changes when the cache is warm, when caching is unavailable
+(BENCHMARKS.md, "Cold and warm start"). Nothing changes when the cache is warm, when caching is unavailable
 (the worker's work could not be shared) or with ``DR_MASONRY_COMPILE_WORKERS=0``; a worker that
 fails only costs the time it ran: what it did not compile compiles here as before.
 """

@@ -56,8 +56,7 @@ class Protocol:
 
         Each quarter cycle of amplitude ``a`` gets ``max(quarter_increments, ceil(a / step))``
         increments, so small cycles are still resolved and large ones move at most ``step`` per
-        increment (a peak inside a cycle needs steps well below its displacement: BENCHMARKS.md
-        section 31).
+        increment (a peak inside a cycle needs steps well below its displacement).
         ``n_amplitudes`` keeps only the first amplitudes (None: all).
         """
         if not (math.isfinite(step) and step > 0):

@@ -80,7 +80,7 @@ def solver_options(params):
 
 def with_penalty(law, factor):
     """``law`` (JointLaw) with the compression penalty ``factor`` x knn: the scene parameter
-    ``kc_factor`` (default ``KC_PEN_FACTOR``; its effect: BENCHMARKS.md section 18)."""
+    ``kc_factor`` (default ``KC_PEN_FACTOR``; its effect: docs/internals.md, "Decisions")."""
     if not (isinstance(factor, (int, float)) and np.isfinite(factor) and factor > 0):
         raise ParameterError(f"parameter kc_factor={factor!r}: must be a positive multiple of knn")
     return law.with_changes(kc_pen=factor * law.knn)

@@ -35,7 +35,7 @@ from .results import check_stored
 #: have slid out of its quad before its point is re-paired. Nodes that start on the edge between
 #: two quads (most of them) would otherwise switch back and forth at every micro-slip, and each
 #: switch moves forces between the quads' nodes: on the S6 wall five such switches at its peak
-#: sent the post-peak path elsewhere at three times the iterations (BENCHMARKS.md, section 21)
+#: sent the post-peak path elsewhere at three times the iterations (BENCHMARKS.md, "Finite-sliding check per increment")
 SWITCH = 0.1
 
 #: how far (fraction of the largest element edge of its block) a node off the surface may lie

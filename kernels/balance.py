@@ -72,7 +72,7 @@ def internal_forces(mesh, cont, dyn):
     """Assemble internal forces into ``dyn.fint`` (n_nodes, 3), N; returns the stored energy, J.
 
     Two parallel regions (forces, then the gather per node): each region costs a wake-up of the
-    worker threads (about 0.1 ms with passive OpenMP waiting, BENCHMARKS.md section 16)."""
+    worker threads (about 0.1 ms with passive OpenMP waiting, docs/internals.md, "Decisions")."""
     element_and_contact_forces(dyn.X, dyn.U, mesh, cont)
     gather_pair(mesh.fbuf.reshape((-1, 3)), mesh.ptr, mesh.rows, cont.fbuf, cont.ptr, cont.rows,
                 dyn.fint)

@@ -11,7 +11,7 @@ import os
 
 # Threads spin-wait with the OpenMP layer on a loaded machine (PERFORMANCE_NOTES.md): be passive.
 # The only place that sets it: every entry point imports this module (through dr_masonry) before
-# Numba starts its thread pool, and the environment still wins (BENCHMARKS.md section 16).
+# Numba starts its thread pool, and the environment still wins (docs/internals.md, "Decisions").
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 import numba  # noqa: E402

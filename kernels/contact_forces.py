@@ -45,8 +45,7 @@ def _dnormal(jac, n0, n1, n2, v0, v1, v2):
     return (v0 - n0 * nv) / jac, (v1 - n1 * nv) / jac, (v2 - n2 * nv) / jac
 
 
-# a call, not inlined: only the few points off their master face take it (BENCHMARKS.md
-# section 37)
+# a call, not inlined: only the few points off their master face take it
 @jit
 def offset_forces(xq, r, s, d, frame, jac, t, ar, fbuf, row):
     """Add to the master rows ``fbuf[row:row + 4]`` the forces of the frame's turning,

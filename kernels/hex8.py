@@ -165,7 +165,7 @@ def gauss_forces(U, conn, active, dN, geo, wdet, h, elem_mat, params, s_old, s_n
     """Every element of ``active`` as a total-Lagrangian hexahedron at its Gauss points: the
     reference that the corotational element of a run is tested and benchmarked against (arguments
     those of :func:`.forces.hex_forces` without tables; runs never call it, so it is compiled
-    apart from their force kernel: 7 s of their cold start, BENCHMARKS.md section 62)."""
+    apart from their force kernel: 7 s of their cold start)."""
     na = active.shape[0]
     for t in prange((na + CHUNK - 1) // CHUNK):   # tasks of CHUNK elements, scratch per task
         ue = np.empty((8, 3))
@@ -234,8 +234,8 @@ def corot_surely_elastic(p, strains):
 
 
 # a call, not inlined: inlined it added 2.5 s to the cold compile to save the call's 80 ns of a
-# damaged element's 1,000 in its elastic range (6,600 in plastic flow, section 63), within the
-# noise of whole runs (BENCHMARKS.md section 61)
+# damaged element's 1,000 in its elastic range (6,600 in plastic flow), within the
+# noise of whole runs
 @jit
 def corot_damaging(p, he, s_old_e, s_new_e, dne, we, strains, R, fe, eye, eps, sig, floc):
     """Forces ``fe`` (8, 3) N of one corotational element of a damaging material.

@@ -137,7 +137,7 @@ def joint_point(p, u, d1, d2, s_old, s_new, t):
         return
     umax = max(s_old[JS_UMAX], u)
     # sqrt of the squares, not np.hypot: hypot's guard against overflow cost 15-20 % of a
-    # contact point's time (BENCHMARKS.md section 38); slips (m) and tractions (Pa) are far
+    # contact point's time; slips (m) and tractions (Pa) are far
     # from where their squares over- or underflow
     dmag = np.sqrt(d1 * d1 + d2 * d2)
     dmax = max(s_old[JS_DMAX], dmag)

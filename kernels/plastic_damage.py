@@ -285,7 +285,7 @@ def surely_elastic(p, i1tr, qtr, sbt, sbc):
 
 
 # a call, not inlined: the return mapping doubled the fused force kernel's compile time, and
-# its cost per plastic point dwarfs a call (BENCHMARKS.md section 37)
+# its cost per plastic point dwarfs a call (BENCHMARKS.md, "Cold and warm start")
 @jit
 def gp_update(p, h, eps, s_old, s_new, sig):
     """Stress update at one Gauss point.

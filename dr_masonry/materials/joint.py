@@ -17,7 +17,7 @@ from ..units import MPa, mm
 #: default compression penalty as a multiple of knn. 10 knn (7.5e11 Pa/m for Table 2) keeps the
 #: overclosure at 1.3 um per MPa, about 8 % of the compliance of an 81 mm block course
 #: (E = 4800 MPa), so the joints add little deformability in compression (paper Sec. 2.3).
-#: Measured (BENCHMARKS.md section 18, ``benchmarks/penalty.py``): peaks of S2, S5 and S6 within
+#: Measured (docs/internals.md, "Decisions", ``benchmarks/penalty.py``): peaks of S2, S5 and S6 within
 #: 0.2-0.8 % of a rigid closed joint, initial stiffness 0.3-4.4 % low; 30 knn costs 1.4-4 x the
 #: iterations, and at 100 knn the S6 softening branch no longer converges (MODEL.md: 10-100 knn).
 KC_PEN_FACTOR = 10.0
