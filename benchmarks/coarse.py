@@ -42,7 +42,7 @@ def run(name, coarse, every):
     S.SolverOptions.__init__ = patched
     try:
         t0 = time.perf_counter()
-        sim, hist, push = module.run(params)
+        sim, hist, push, _ = module.run(params)
         wall = time.perf_counter() - t0
     finally:
         S.SolverOptions.__init__ = init

@@ -82,7 +82,7 @@ def built_scene(scene, args, name):
     run = scene_params(mod.PARAMS, getattr(mod, "FAST", None),
                        [f"out={os.path.join(OUT, name)}", "maps="] + args.split(), mod.__doc__)
     run["progress"] = False
-    return mod.build(run)
+    return mod.build(run)[:2]      # a scene with its own data returns it third
 
 
 def stored_run(scene, path, name):
@@ -102,7 +102,7 @@ def stored_run(scene, path, name):
     shutil.copy(path, copy)
     stored = open_result(copy).config
     run = {**mod.PARAMS, **stored, "h5": copy, "progress": False}  # keys newer than the file: defaults
-    sim, stages = mod.build(run)
+    sim, stages = mod.build(run)[:2]
     return sim, stages, copy
 
 

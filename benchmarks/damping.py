@@ -126,7 +126,8 @@ def scenes(params, schemes):
             "rocking block": lambda: rocking(params, damping),
         }
         for scene, make in builds.items():
-            sim, stages = make()
+            built = make()            # (sim, stages), the wallet's with its Wallet third
+            sim, stages = built[:2]
             per_stage, wall, err = run_stages(sim, stages, params)
             for name, its in per_stage:
                 rows.append(dict(scene=scene, stage=name, damping=damping, increments=len(its),
@@ -144,7 +145,7 @@ def scenes(params, schemes):
             elif scene == "S2 triplet" and "push.fx" in h:
                 extra = f"max tau {np.max(h['push.fx']) / (2 * triplet.AREA) / 1e6:.3f} MPa"
             elif scene == "S3 wallet" and "platen.fz" in h:
-                extra = f"max stress {np.max(-h['platen.fz']) / sim.area / 1e6:.2f} MPa"
+                extra = f"max stress {np.max(-h['platen.fz']) / built[2].area / 1e6:.2f} MPa"
             for r in rows:
                 r.setdefault("wall_s_scene", float("nan"))
                 r.setdefault("relax_s_scene", float("nan"))

@@ -220,7 +220,7 @@ def scene(problem, params, mesh, tol):
     if params["quick"]:
         p.update(squat_wall.FAST)
     p.update(mesh=mesh, tol=tol, h5=None)
-    sim, stages = squat_wall.build(p)
+    sim, stages, _ = squat_wall.build(p)
     return sim, stages, "beam.ux", "beam.fx", 1.0
 
 

@@ -77,10 +77,10 @@ def build(params):
     if params["scene"] == "s3":
         from dr_masonry.cases import wallet
         return wallet.build(dict(wallet.PARAMS, shortening=params["s3_shortening"],
-                                 increments=params["s3_increments"], h5=h5))
+                                 increments=params["s3_increments"], h5=h5))[:2]
     if params["scene"] == "s5fast":
         from dr_masonry.cases import squat_wall
-        return squat_wall.build(dict(squat_wall.PARAMS, **squat_wall.FAST, fast=True, h5=h5))
+        return squat_wall.build(dict(squat_wall.PARAMS, **squat_wall.FAST, fast=True, h5=h5))[:2]
     raise ParameterError(f"parameter scene={params['scene']!r}: valid values are s2, s3, s5fast")
 
 

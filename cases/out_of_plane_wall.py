@@ -29,6 +29,7 @@ out_of_plane_wall``); ``mesh=coarse`` is one hexahedron per brick; ``fast=true``
 run times (hours): README, "Full protocols".
 """
 import sys
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -36,7 +37,8 @@ from dr_masonry import (Combined, Displacement, Indirect, JointLaw, PlasticDamag
                         Stage)
 from dr_masonry.cases import squat_wall
 from dr_masonry.cli import run_script
-from dr_masonry.geometry import plane_nodes
+from dr_masonry.geometry import Wall, plane_nodes
+from dr_masonry.loading import NodeSet
 from dr_masonry.materials.joint import KC_PEN_FACTOR
 from dr_masonry.model import quad_area_vector
 from dr_masonry.postprocess import cycle_text, energy_per_cycle
@@ -79,23 +81,29 @@ VIEWS = {"view_front": dict(camera="elevation", field="dt"),
          "view_back": dict(camera="back", field="dt")}
 
 
+@dataclass(frozen=True)
+class OutOfPlaneWall:
+    """The scene data of the S6 wall, returned by :func:`build` and :func:`run`."""
+    wall: Wall            # the wall's geometry
+    centre: NodeSet       # the control node, nearest the centre of the loaded face
+    airbag: Combined      # the pressure's load pattern (factor 1 = 1 N lateral force in all)
+    loaded_area: float    # m^2, area of the pressurised face
+
+
 def build(params):
-    """Model and stages. Sets ``sim.wall``, ``sim.centre`` (node set of the control node),
-    ``sim.airbag`` (the pressure's load pattern) and ``sim.loaded_area`` (m^2, area of the
-    pressurised face)."""
+    """``(sim, stages, scene)``: the simulation, its stages and the :class:`OutOfPlaneWall`."""
     kind = choice(params, "protocol", ("monotonic", "cyclic"))
-    sim, wall, beam, base, pre = squat_wall.rig(params, JointLaw.reference(),
-                                                PlasticDamage.reference())
-    model = sim.model
+    sim, rig, pre = squat_wall.rig(params, JointLaw.reference(), PlasticDamage.reference())
+    model, wall, beam = sim.model, rig.wall, rig.beam
     L, H = wall.length, wall.height
     bricks = [b for c in wall.courses for b in c]
     quads = np.concatenate([model.block_face(b, 2)[1] for b in bricks])  # faces y = 0
-    sim.loaded_area = float(np.linalg.norm(quad_area_vector(model.nodes[quads]), axis=1).sum())
+    loaded_area = float(np.linalg.norm(quad_area_vector(model.nodes[quads]), axis=1).sum())
     # factor 1 = 1 N in all: the load factor is the total lateral force
-    airbag = Combined([(Pressure(quads, name="pressure"), 1.0 / sim.loaded_area)], name="airbag")
+    airbag = Combined([(Pressure(quads, name="pressure"), 1.0 / loaded_area)], name="airbag")
     face = plane_nodes(model, 1, 0.0, blocks=bricks)  # the control node must carry pressure
     d2 = (model.nodes[face, 0] - 0.5 * L) ** 2 + (model.nodes[face, 2] - 0.5 * H) ** 2
-    sim.centre = sim.node_set("centre", face[[int(np.argmin(d2))]])
+    centre = sim.node_set("centre", face[[int(np.argmin(d2))]])
     edges = np.concatenate([plane_nodes(model, 0, 0.0, blocks=bricks),
                             plane_nodes(model, 0, L, blocks=bricks)])
     sim.node_set("edges", edges)
@@ -109,38 +117,40 @@ def build(params):
                        n_amplitudes=params["n_amplitudes"] or None)
     stages = [Stage("precompression", params["pre_increments"], pre,
                     frames=params["pre_increments"]),
-              Stage("push", path.size, [Indirect(pattern=airbag, target=sim.centre, dof="y",
+              Stage("push", path.size, [Indirect(pattern=airbag, target=centre, dof="y",
                                                  path=path, name="airbag")],
                     frames=params["frames"], frame_at=turning_points(path))]
-    sim.wall, sim.airbag = wall, airbag
-    return sim, stages
+    return sim, stages, OutOfPlaneWall(wall, centre, airbag, loaded_area)
 
 
 def run(params):
-    """Run; returns (simulation, history with a ``lateral_force`` column (N), push mask)."""
-    sim, stages = build(params)
+    """Run; returns (simulation, history with a ``lateral_force`` column (N), push mask,
+    :class:`OutOfPlaneWall`)."""
+    sim, stages, scene = build(params)
     hist = run_stages(sim, stages, params)
     push = hist["increment"] > stages[0].increments
     hist["lateral_force"] = np.where(push, hist["lambda"], 0.0)
-    return sim, hist, push
+    return sim, hist, push, scene
 
 
-def report(sim, hist, push):
+def report(sim, hist, push, scene):
     """One-line summary: peak lateral force (both directions' in a cyclic run) at its centre
-    displacement, and as a pressure; damage, iterations per increment."""
+    displacement, and as a pressure (``scene``: the :class:`OutOfPlaneWall`); damage, iterations
+    per increment."""
     u, F = curve(hist, push)
+    balance = equilibrium_text(F, support_reaction(sim, hist, push, scene),
+                               at_floor(sim, hist, push))
     return (f"peak lateral force {peaks_text(u, F)} centre displacement (pressure "
-            f"{peaks_text(u, F / sim.loaded_area, 1e3, 'kPa')}); "
-            f"{equilibrium_text(F, support_reaction(sim, hist, push), at_floor(sim, hist, push))}"
-            "; "
+            f"{peaks_text(u, F / scene.loaded_area, 1e3, 'kPa')}); {balance}; "
             + solver_summary(hist, push))
 
 
-def support_reaction(sim, hist, rows):
+def support_reaction(sim, hist, rows, scene):
     """The out-of-plane reaction of the held edges, the top beam and the foundation (N) that
     balances the lateral force of the history rows ``rows``, less the airbag's pressure on the
-    held edge nodes (node-set reactions leave out the load on their own nodes)."""
-    P = sim.pattern_forces(sim.airbag)[0]
+    held edge nodes (node-set reactions leave out the load on their own nodes); ``scene``: the
+    :class:`OutOfPlaneWall`."""
+    P = sim.pattern_forces(scene.airbag)[0]
     direct = hist["lambda"][rows] * P[sim.node_sets["edges"].nodes, 1].sum()
     return -(hist["edges.fy"][rows] + hist["beam.fy"][rows] + hist["base.fy"][rows]) + direct
 
@@ -153,17 +163,17 @@ def curve(hist, rows):
 
 def main(argv=None):
     params = scene_params(PARAMS, FAST, sys.argv[1:] if argv is None else argv, __doc__)
-    sim, hist, push = run(params)
+    sim, hist, push, scene = run(params)
     cycles = (energy_per_cycle(hist, "centre.uy", push, force="lateral_force")
               if params["protocol"] == "cyclic" else None)
     x, y = curve(hist, push)
     finish(sim, params["out"], x=x / mm, y=y / kN, xlabel="centre displacement (mm)",
            ylabel="lateral force (kN)", title=f"S6 out-of-plane wall, {params['protocol']}",
            cycles=cycles, label=f"this run ({params['protocol']})",
-           reaction=support_reaction(sim, hist, push) / kN, floor=at_floor(sim, hist, push),
+           reaction=support_reaction(sim, hist, push, scene) / kN, floor=at_floor(sim, hist, push),
            reference=compare_curve(params, "pre_increments", curve))
     write_maps(sim, params, params["out"], squat_wall.MAPS, x, y, push)
-    print(report(sim, hist, push))
+    print(report(sim, hist, push, scene))
     if cycles:
         print(cycle_text(cycles))
 

@@ -33,12 +33,13 @@ VIEWS = squat_wall.VIEWS
 
 
 def build(params):
-    """Model and stages (see :func:`squat_wall.build`)."""
+    """``(sim, stages, rig)``: the simulation, its stages and the :class:`squat_wall.Rig` (see
+    :func:`squat_wall.build`)."""
     return squat_wall.build(params, S4)
 
 
 def run(params):
-    """Run; returns (simulation, history, push-stage mask)."""
+    """Run; returns (simulation, history, push-stage mask, :class:`squat_wall.Rig`)."""
     return squat_wall.run(params, S4)
 
 

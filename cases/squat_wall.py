@@ -39,14 +39,15 @@ the external work over large steps; it shrinks with the step, see tests/test_wal
 protocols' commands and measured run times: README, "Full protocols".
 """
 import sys
+from dataclasses import dataclass
 
 import numpy as np
 
 from dr_masonry import (Displacement, Force, JointLaw, Load, Model, PlasticDamage, Simulation,
                         Stage)
 from dr_masonry.cli import run_script
-from dr_masonry.geometry import BrickSpec, add_beam, add_foundation, add_wall, plane_nodes
-from dr_masonry.loading import Gravity
+from dr_masonry.geometry import BrickSpec, Wall, add_beam, add_foundation, add_wall, plane_nodes
+from dr_masonry.loading import Gravity, NodeSet, RigidPoint
 from dr_masonry.materials.joint import KC_PEN_FACTOR
 from dr_masonry.params import ParameterError
 from dr_masonry.postprocess import cycle_text, energy_per_cycle
@@ -118,17 +119,27 @@ def materials(variant="reference", shear_damage="calibrated"):
     return law, block
 
 
+@dataclass(frozen=True)
+class Rig:
+    """The scene data of a wall in the loading rig (S4, S5, S6), returned by :func:`rig` and
+    :func:`build`."""
+    wall: Wall             # the wall's geometry (blocks, courses, length, height, thickness)
+    beam: RigidPoint       # the loading beam's reference point (history ``beam.*``)
+    base: NodeSet          # the foundation's top-face node set (reactions ``base.f*``)
+    n_top: float           # N, the vertical force on the wall's top (sigma x plan area)
+    weight_wall: float     # N, the wall's self-weight (0 without gravity)
+
+
 def rig(params, law, block):
     """A wall on a fixed foundation under a stiff steel loading beam (S4, S5, S6).
 
     Uses ``length``, ``height``, ``mesh``, ``beam_height``, ``gravity``, ``sigma``, the
     solver options (``scene.OPTION_KEYS``), ``kc_factor`` (the joints' compression penalty, x knn)
     of ``params``. Returns
-    ``(sim, wall, beam, base, pre)``: the simulation, the :class:`~dr_masonry.geometry.Wall`,
-    the beam's reference point (centre of the wall's top face), the foundation's top-face node set
-    (reactions ``base.f*``) and the pre-compression controls (gravity and the force ``N`` that
-    makes the top of the wall carry ``sigma`` x plan area, the beam's weight subtracted; the base
-    held). Sets ``sim.n_top`` and ``sim.weight_wall`` (N).
+    ``(sim, rig, pre)``: the simulation, the :class:`Rig` (the wall, the beam's reference point at
+    the centre of the wall's top face, the foundation's top-face node set, the top force and the
+    wall's weight) and the pre-compression controls (gravity and the force ``N`` that makes the
+    top of the wall carry ``sigma`` x plan area, the beam's weight subtracted; the base held).
     """
     if not params["sigma"] >= 0:
         raise ParameterError(f"parameter sigma={params['sigma']!r}: must be >= 0 Pa (compression)")
@@ -151,34 +162,32 @@ def rig(params, law, block):
     base = sim.node_set("base", plane_nodes(model, 2, 0.0, blocks=[fnd]))
     g = Gravity()
     weight_beam = STEEL.density * L * t * hb * g.g if params["gravity"] else 0.0
-    sim.weight_wall = block.density * L * t * H * g.g if params["gravity"] else 0.0
-    sim.n_top = params["sigma"] * L * t
-    if sim.n_top < weight_beam:
+    weight_wall = block.density * L * t * H * g.g if params["gravity"] else 0.0
+    n_top = params["sigma"] * L * t
+    if n_top < weight_beam:
         raise ParameterError(f"parameter sigma={params['sigma']!r} Pa: the beam's weight alone "
                              f"({weight_beam / (L * t):.4g} Pa) exceeds the pre-compression")
-    pre = [Force(target=beam, dof="z", to=-(sim.n_top - weight_beam), name="N")]
+    pre = [Force(target=beam, dof="z", to=-(n_top - weight_beam), name="N")]
     pre += [Displacement(target=base, dof=d, to=0.0) for d in "xyz"]
     if params["gravity"]:
         pre.append(Load(pattern=g, to=1.0))
-    return sim, wall, beam, base, pre
+    return sim, Rig(wall, beam, base, n_top, weight_wall), pre
 
 
 def build(params, protocol=S5):
-    """Model and stages of an in-plane wall test (S5 squat wall; S4 uses ``protocol=S4``).
-
-    Sets ``sim.wall`` (the :class:`~dr_masonry.geometry.Wall`), ``sim.beam`` (the loading beam's
-    reference point), ``sim.n_top`` (N, vertical force on the wall's top) and ``sim.weight_wall``
-    (N, the wall's self-weight, 0 without gravity).
-    """
+    """``(sim, stages, rig)`` of an in-plane wall test (S5 squat wall; S4 uses ``protocol=S4``):
+    the simulation, its stages and the scene's :class:`Rig` (wall, beam, base, top force, wall
+    weight)."""
     bc = choice(params, "bc", ("cantilever", "double_clamped"))
     kind = choice(params, "protocol", ("monotonic", "cyclic"))
     choice(params, "shear_damage", ("calibrated", "paper"))
     law, block = materials(params["variant"], params["shear_damage"])
-    sim, wall, beam, base, pre = rig(params, law, block)
+    sim, scene, pre = rig(params, law, block)
+    beam = scene.beam
     held = ("y", "rx", "rz") + (("ry",) if bc == "double_clamped" else ())
     pre += [Displacement(target=beam, dof="x", to=0.0, name="push")]
     pre += [Displacement(target=beam, dof=d, to=0.0) for d in held]
-    H = wall.height
+    H = scene.wall.height
     if kind == "monotonic":
         path = protocol.monotonic_path(params["increments"], H, params["drift"], params["grading"])
     else:
@@ -188,15 +197,14 @@ def build(params, protocol=S5):
     stages = [Stage("precompression", params["pre_increments"], pre, frames=params["pre_increments"]),
               Stage("push", path.size, [Displacement(target=beam, dof="x", path=path, name="push")],
                     frames=params["frames"], frame_at=turning_points(path))]
-    sim.wall, sim.beam = wall, beam
-    return sim, stages
+    return sim, stages, scene
 
 
 def run(params, protocol=S5):
-    """Run; returns (simulation, history, push-stage mask (bool array))."""
-    sim, stages = build(params, protocol)
+    """Run; returns (simulation, history, push-stage mask (bool array), :class:`Rig`)."""
+    sim, stages, scene = build(params, protocol)
     hist = run_stages(sim, stages, params)
-    return sim, hist, hist["increment"] > stages[0].increments
+    return sim, hist, hist["increment"] > stages[0].increments, scene
 
 
 def report(sim, hist, push):
@@ -230,7 +238,7 @@ VIEWS = {"view_cracks": dict(camera="elevation", field="dt"),
 
 def main(argv=None, doc=__doc__, defaults=PARAMS, protocol=S5, title="S5 squat wall"):
     params = scene_params(defaults, FAST, sys.argv[1:] if argv is None else argv, doc)
-    sim, hist, push = run(params, protocol)
+    sim, hist, push, _ = run(params, protocol)
     cycles = (energy_per_cycle(hist, "beam.ux", push, force="beam.fx")
               if params["protocol"] == "cyclic" else None)
     x, y = curve(hist, push)

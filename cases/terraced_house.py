@@ -36,7 +36,7 @@ Run: ``python cases/terraced_house.py [key=value ...]`` (or ``dr-masonry run ter
 full protocols' commands and measured run times (hours): README, "Full protocols".
 """
 import sys
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -90,6 +90,14 @@ REACTIONS = {"base_P1": "pier_wide", "base_P2": "pier_narrow", "base_W1": "trans
              "base_W2": "transversal_wall_2"}
 
 
+@dataclass(frozen=True)
+class House:
+    """The scene data of the S7 house, returned by :func:`build` and :func:`run`."""
+    groups: dict          # the generator's block groups, name -> block ids (terraced_house)
+    floors: list          # the slabs' reference points (RigidPoint), bottom first
+    house_params: HouseParams   # the house's dimensions and mesh
+
+
 def house_params(params):
     """The :class:`HouseParams` of a mesh choice (``tiny``: the scaled smoke-test house)."""
     mesh = choice(params, "mesh", (*MESHES, "tiny"))
@@ -99,8 +107,8 @@ def house_params(params):
 
 
 def build(params):
-    """Model and stages. Sets ``sim.groups`` (the generator's block groups), ``sim.floors`` (the
-    slab reference points, bottom first) and ``sim.house`` (the HouseParams)."""
+    """``(sim, stages, house)``: the simulation, its stages and the :class:`House` (block
+    groups, floor reference points, HouseParams)."""
     choice(params, "direction", (1, -1))
     choice(params, "protocol", ("monotonic", "cyclic"))
     hp = house_params(params)
@@ -139,23 +147,23 @@ def build(params):
               Stage("push", path.size, [Indirect(pattern=pattern, target=floors[-1], dof="x",
                                                  path=path, name="push")],
                     frames=params["frames"], frame_at=turning_points(path))]
-    sim.groups, sim.floors, sim.house = groups, floors, hp
-    return sim, stages
+    return sim, stages, House(groups, floors, hp)
 
 
 def run(params):
-    """Run; returns (simulation, history with ``base_shear`` (N, whole house), push mask)."""
-    sim, stages = build(params)
+    """Run; returns (simulation, history with ``base_shear`` (N, whole house), push mask,
+    :class:`House`)."""
+    sim, stages, house = build(params)
     hist = run_stages(sim, stages, params)
     push = hist["increment"] > stages[0].increments
-    hist["base_shear"] = np.where(push, curve(hist, slice(None), len(sim.floors))[1], 0.0)
-    return sim, hist, push
+    hist["base_shear"] = np.where(push, curve(hist, slice(None), len(house.floors))[1], 0.0)
+    return sim, hist, push, house
 
 
-def report(sim, hist, push):
+def report(sim, hist, push, house):
     """One-line summary: peak base shear of the whole house (both directions' in a cyclic run)
-    at its top displacement, damage, iterations per increment."""
-    u, V = curve(hist, push, len(sim.floors))
+    at its top displacement, damage, iterations per increment (``house``: the :class:`House`)."""
+    u, V = curve(hist, push, len(house.floors))
     return (f"peak base shear (whole house) {peaks_text(u, V)} top displacement; "
             f"{equilibrium_text(V, base_reaction(hist, push), at_floor(sim, hist, push))}; "
             + solver_summary(hist, push))
@@ -173,10 +181,11 @@ def base_reaction(hist, rows):
     return -2.0 * hist["base.fx"][rows]
 
 
-def maps(sim):
+def maps(house):
     """Crack maps of the facade (piers, spandrels and lintels; x-z) and of each transversal wall
-    (y-z), joint damage with block tensile damage; the facade's crushing map."""
-    g = sim.groups
+    (y-z) of the :class:`House` ``house``, joint damage with block tensile damage; the facade's
+    crushing map."""
+    g = house.groups
     facade = dict(plane="xz", blocks=np.concatenate([g["facade"], g["lintels"]]))
     return {"facade_cracks": facade, "facade_crushing": dict(facade, element_field="dc"),
             "wall1_cracks": dict(plane="yz", blocks=g["transversal_wall_1"]),
@@ -185,12 +194,12 @@ def maps(sim):
 
 def main(argv=None):
     params = scene_params(PARAMS, FAST, sys.argv[1:] if argv is None else argv, __doc__)
-    sim, hist, push = run(params)
-    top = f"{sim.floors[-1].name}.ux"
+    sim, hist, push, house = run(params)
+    top = f"{house.floors[-1].name}.ux"
     # cycles of the half model: its energies with its own base shear (half the house's)
     cycles = (energy_per_cycle(dict(hist, half_shear=0.5 * hist["base_shear"]), top, push,
                                force="half_shear") if params["protocol"] == "cyclic" else None)
-    x, y = curve(hist, push, len(sim.floors))
+    x, y = curve(hist, push, len(house.floors))
     out = params["out"]
     finish(sim, out, x=x / mm, y=y / kN, xlabel="top displacement (mm)",
            ylabel="base shear, whole house (kN)",
@@ -198,14 +207,14 @@ def main(argv=None):
            cycles=cycles, label=f"this run ({params['protocol']})",
            reaction=base_reaction(hist, push) / kN, floor=at_floor(sim, hist, push),
            reference=compare_curve(
-               params, "gravity_increments", lambda h, r: curve(h, r, len(sim.floors))))
+               params, "gravity_increments", lambda h, r: curve(h, r, len(house.floors))))
     if sim.output is not None:   # Fig. 26: the load moves between the walls and the piers
         plot_history(sim.output, top, [f"{k}.fz" for k in REACTIONS], out + "_reactions.png",
                      ylabel="vertical reaction, half model (kN)",
                      title="vertical reactions (paper Fig. 26): P1 wide pier, P2 narrow pier,\n"
                            "W1, W2 transversal walls")
-    write_maps(sim, params, out, maps(sim), x, y, push)
-    print(report(sim, hist, push))
+    write_maps(sim, params, out, maps(house), x, y, push)
+    print(report(sim, hist, push, house))
     if cycles:
         print("cycles of the half model (base shear and energies half the house's):\n"
               + cycle_text(cycles))

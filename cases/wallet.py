@@ -10,6 +10,7 @@ and the run passes the peak without diverging (here: to at least three times the
 Run: ``python cases/wallet.py [key=value ...]``; about a minute on 2 cores after compilation.
 """
 import sys
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -33,8 +34,16 @@ CURVE = dict(x="platen.uz", y="platen.fz", stage=None, xscale=-1 / mm, yscale=-1
              xlabel="platen shortening (mm)", ylabel="platen force (kN)")
 
 
+@dataclass(frozen=True)
+class Wallet:
+    """The scene data of the wallet, returned by :func:`build` and :func:`run`."""
+    area: float     # m^2, the loaded (plan) area, length x thickness
+    height: float   # m, the wallet's height
+
+
 def build(params):
-    """Model and stages of the wallet compression test."""
+    """``(sim, stages, wallet)`` of the wallet compression test: the simulation, its stage and
+    the :class:`Wallet` (plan area and height)."""
     model = Model()
     model.set_joint_law(JointLaw.reference())
     brick = BrickSpec(nx_along=params["nx"], ny_thick=params["ny"], nz_height=params["nz"])
@@ -47,21 +56,21 @@ def build(params):
     sim.fix(base[np.argmax(model.nodes[base, 0])], "y")
     top = sim.node_set("platen", plane_nodes(model, 2, wall.height))
     press = Displacement(target=top, dof="z", to=-params["shortening"], name="press")
-    sim.area = wall.length * wall.thickness
-    sim.height = wall.height
-    return sim, [Stage("compression", params["increments"], [press])]
+    wallet = Wallet(area=wall.length * wall.thickness, height=wall.height)
+    return sim, [Stage("compression", params["increments"], [press])], wallet
 
 
 def run(params):
-    """Run; returns (simulation, strain (-), stress (Pa)) with compression positive."""
-    sim, stages = build(params)
+    """Run; returns (simulation, strain (-), stress (Pa), :class:`Wallet`) with compression
+    positive."""
+    sim, stages, wallet = build(params)
     hist = sim.run(stages)
-    return sim, -hist["platen.uz"] / sim.height, -hist["platen.fz"] / sim.area
+    return sim, -hist["platen.uz"] / wallet.height, -hist["platen.fz"] / wallet.area, wallet
 
 
 def main(argv=None):
     params = scene_params(PARAMS, None, sys.argv[1:] if argv is None else argv, __doc__)
-    sim, strain, stress = run(params)
+    sim, strain, stress, _ = run(params)
     finish(sim, params["out"], x=strain * 1e3, y=stress / MPa, xlabel="strain (per mille)",
            ylabel="compressive stress (MPa)", title="S3 wallet",
            reference=([0, strain[-1] * 1e3], [6.8, 6.8], "block strength 6.8 MPa"))

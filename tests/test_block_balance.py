@@ -20,7 +20,7 @@ def _fast_wall(tmp_path, block_tol):
                           ["fast=true", f"block_tol={block_tol}", f"out={tmp_path}/w{block_tol}"],
                           squat_wall.__doc__)
     params["progress"] = False
-    sim, hist, _ = squat_wall.run(params, squat_wall.S5)
+    sim, hist, _, _ = squat_wall.run(params, squat_wall.S5)
     return sim, hist
 
 

@@ -67,8 +67,8 @@ def _peak(case, damping):
     if case == "triplet":
         _, _, tau = mod.run(dict(mod.PARAMS, increments=30, h5=None, damping=damping), 0.6e6)
         return tau.max()
-    _, _, stress = mod.run(dict(mod.PARAMS, shortening=0.003, increments=15, h5=None,
-                                damping=damping))
+    _, _, stress, _ = mod.run(dict(mod.PARAMS, shortening=0.003, increments=15, h5=None,
+                                   damping=damping))
     return stress.max()
 
 

@@ -36,12 +36,12 @@ def test_s6_pressure_balances_supports(s6):
     """The airbag force (pressure factor x loaded area) equals the out-of-plane reactions of the
     edges, the beam and the foundation (node-set reactions exclude the pressure that acts
     directly on the held edge nodes): the indirect control finds a consistent pressure."""
-    sim, hist, push = s6
+    sim, hist, push, scene = s6
     F = hist["lateral_force"][push]
     assert F[0] > 0 and np.all(F > 0)
     P = sim.patterns["airbag"][1]
     assert P[:, 1].sum() == pytest.approx(1.0, rel=1e-12)  # factor = total force
-    assert np.allclose(out_of_plane_wall.support_reaction(sim, hist, push), F, rtol=2e-3,
+    assert np.allclose(out_of_plane_wall.support_reaction(sim, hist, push, scene), F, rtol=2e-3,
                        atol=1e-3 * F.max())
     p = fast(out_of_plane_wall)
     path = S6.monotonic_path(p["increments"], target=p["target"], grading=p["grading"])
@@ -52,7 +52,7 @@ def test_s6_cracks_and_energy(s6):
     """Past the peak the wall has cracked at the base (horizontal crack) and the force has
     dropped; the energy balance closes (the first push increment jumps across the joints' peak:
     its trapezoidal external work is a few per cent off, later ones converge to < 1 %)."""
-    sim, hist, push = s6
+    sim, hist, push, _ = s6
     F = hist["lateral_force"][push]
     assert F[-1] < 0.7 * F.max()
     z = sim.model.nodes[sim.cont.slave, 2]
@@ -65,7 +65,7 @@ def test_s7_reactions_split_by_wall(s7):
     """Gravity: the per-wall contact reactions add up to the foundation's reaction and to the
     weight of the half house; pushing towards +x moves load from wall W1 to wall W2 (overturning),
     and the base shear equals twice the floor force (two floors)."""
-    sim, hist, push = s7
+    sim, hist, push, _ = s7
     m = sim.model
     parts = sum(hist[f"{n}.fz"] for n in terraced_house.REACTIONS)
     assert np.allclose(parts, hist["base.fz"], rtol=1e-9, atol=1e-6)
@@ -85,7 +85,7 @@ def test_s7_out_of_balance_resultant_is_load_minus_reaction(s7):
     contact reaction ``base.fx``), and the driving force ``drive.fx`` the floors' load, 2 x the
     load factor on the half model; the gravity rows drive nothing (the floor held at 0 is a
     support) and have no ratio."""
-    sim, hist, push = s7
+    sim, hist, push, _ = s7
     lam = hist["lambda"]
     np.testing.assert_allclose(hist["gap.fx"], 2 * lam + hist["base.fx"], rtol=0,
                                atol=1e-9 * np.abs(lam).max())
@@ -97,7 +97,7 @@ def test_s7_out_of_balance_resultant_is_load_minus_reaction(s7):
 
 
 def test_s7_softens_and_balances(s7):
-    sim, hist, push = s7
+    sim, hist, push, _ = s7
     V = hist["base_shear"][push]
     k = int(np.argmax(V))
     assert 0 < k < V.size - 1 and V[-1] < 0.9 * V[k]
@@ -112,8 +112,8 @@ def test_s7_energy_balance_converges_with_the_step(s7):
     0.5 (kc - (1 - D) knn) u0 u1 < 0 (u0 < 0 < u1), O(step^2) per point (BENCHMARKS.md section
     32). Halving the steps of the tiny house's push (the same path to 3 mm) must shrink it by
     more than the factor 2 of a first-order error: measured 0.95 % -> 0.08 %."""
-    _, hist5, push5 = s7
-    _, hist10, push10 = terraced_house.run(fast(terraced_house, increments=10))
+    _, hist5, push5, _ = s7
+    _, hist10, push10, _ = terraced_house.run(fast(terraced_house, increments=10))
     u5, u10 = hist5["floor2.ux"][push5], hist10["floor2.ux"][push10]
     assert u10[-1] == pytest.approx(u5[-1], rel=1e-9)
     e5, e10 = abs(hist5["balance_error"][-1]), abs(hist10["balance_error"][-1])
@@ -232,8 +232,8 @@ def test_s6_cyclic_default_resolves_its_first_peak():
     """The S6 scene's cyclic path moves 0.5 mm per increment, four increments to the 2 mm
     amplitude (1 mm steps cut the peak inside that cycle, at about 1.5 mm, 15 % low; 0.5 mm gives
     it within 0.3 % of 0.25 mm steps: BENCHMARKS.md section 31)."""
-    sim, stages = out_of_plane_wall.build({**out_of_plane_wall.PARAMS, "protocol": "cyclic",
-                                           "h5": None})
+    sim, stages, _ = out_of_plane_wall.build({**out_of_plane_wall.PARAMS, "protocol": "cyclic",
+                                              "h5": None})
     path = stages[-1].controls[0].path
     steps = np.abs(np.diff(np.concatenate([[0.0], path])))
     assert steps == pytest.approx(0.5e-3) and path[3] == pytest.approx(2e-3)
@@ -254,7 +254,7 @@ def test_kc_factor_sets_the_compression_penalty(module):
 
 
 def test_contact_reaction_needs_a_joint():
-    sim = terraced_house.build(fast(terraced_house))[0]
-    g = sim.groups
+    sim, _, house = terraced_house.build(fast(terraced_house))
+    g = house.groups
     with pytest.raises(LoadingError, match="no joint"):
         sim.contact_reaction("nowhere", g["slabs_floor2"], g["foundation"])

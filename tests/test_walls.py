@@ -37,29 +37,28 @@ def tiny(module, **kw):
     return dict(module.PARAMS, **squat_wall.FAST, h5=None, **kw)
 
 
-def linear_stiffness(sim, held):
-    """Stiffness (N/m) of the loading beam's x DOF with its DOFs ``held`` (0..5: x, y, z, rx, ry,
-    rz) at zero, from the direct solve of the same mesh (tests/linear_reference.py): the bed
-    joints, all compressed by the pre-compression, at their compression penalty kc_pen, the head
-    joints at knn (at kc_pen too the stiffness rises by 0.07 % cantilever, 0.15 % clamped)."""
+def linear_stiffness(sim, beam, held):
+    """Stiffness (N/m) of the x DOF of the loading beam's reference point ``beam`` with its DOFs
+    ``held`` (0..5: x, y, z, rx, ry, rz) at zero, from the direct solve of the same mesh
+    (tests/linear_reference.py): the bed joints, all compressed by the pre-compression, at their
+    compression penalty kc_pen, the head joints at knn (at kc_pen too the stiffness rises by
+    0.07 % cantilever, 0.15 % clamped)."""
     m = sim.model
     fixed = np.repeat(m.block_fixed[m.node_block][:, None], 3, axis=1)   # the foundation
     bed = np.abs(LR.contact_normals(m)[:, 2]) > 0.9
-    return LR.rigid_point_stiffness(m, fixed, sim.beam.nodes, sim.beam.position, 0, held, bed)
+    return LR.rigid_point_stiffness(m, fixed, beam.nodes, beam.position, 0, held, bed)
 
 
 @pytest.fixture(scope="module")
 def squat():
     """Tiny S5 (cantilever, 0.30 MPa) pushed monotonically to 0.2 % drift (1.6 mm)."""
-    sim, hist, push = squat_wall.run(tiny(squat_wall))
-    return sim, hist, push
+    return squat_wall.run(tiny(squat_wall))
 
 
 @pytest.fixture(scope="module")
 def slender_cyclic():
     """Tiny S4 (double clamped, 0.52 MPa), the first two cyclic amplitudes, two cycles each."""
-    sim, hist, push = slender_wall.run(tiny(slender_wall, protocol="cyclic"))
-    return sim, hist, push
+    return slender_wall.run(tiny(slender_wall, protocol="cyclic"))
 
 
 def test_protocols_documented_amplitudes():
@@ -109,7 +108,7 @@ def test_variants_double_the_parameters():
 
 def test_squat_vertical_reaction(squat):
     """The foundation carries the pre-compression plus the wall's self-weight (to 0.5 %)."""
-    sim, hist, push = squat
+    sim, hist, push, _ = squat
     expect = 0.30e6 * A + RHO * G * A * H
     assert np.all(np.abs(hist["base.fz"][push] / expect - 1) < 0.005)
     assert np.all(np.abs(hist["base.fx"][push] + hist["beam.fx"][push])
@@ -122,17 +121,17 @@ def test_squat_initial_stiffness(squat):
     0.6 % at the next two: the first step is so small that the force left unbalanced at tol 1e-4
     (of the 27 kN pre-compression) is 1 % of its 0.6 kN. A Timoshenko beam of bricks and bed
     joints in series is 9 % softer (it ignores the end constraints of a wall with H/L = 0.9)."""
-    sim, hist, push = squat
+    sim, hist, push, rig = squat
     rows = np.nonzero(push)[0][:3]
     k = hist["beam.fx"][rows] / hist["beam.ux"][rows]
-    np.testing.assert_allclose(k, linear_stiffness(sim, held=(1, 3, 5)), rtol=0.02)
+    np.testing.assert_allclose(k, linear_stiffness(sim, rig.beam, held=(1, 3, 5)), rtol=0.02)
 
 
 def test_squat_capacity_bounds(squat):
     """Base shear below the sliding capacity of the top bed joint (c A + tan(phi) N) and the
     rocking capacity about the toe ((N + W) L / 2 + ft t L^2 / 2) / H; with sliding well above
     rocking the wall must rock: the peak reaches 80 % of the no-tension rocking capacity."""
-    sim, hist, push = squat
+    sim, hist, push, _ = squat
     n_top = 0.30e6 * A
     n_base = n_top + RHO * G * A * H
     v = np.abs(hist["beam.fx"][push])
@@ -143,7 +142,7 @@ def test_squat_capacity_bounds(squat):
 
 
 def test_squat_energy_balance(squat):
-    sim, hist, push = squat
+    sim, hist, push, _ = squat
     assert np.all(np.abs(hist["balance_error"]) < 0.01)
 
 
@@ -151,13 +150,14 @@ def test_slender_cyclic_reversal(slender_cyclic):
     """Cyclic run through load reversals in one go: the beam follows the protocol, the base
     shear changes sign with the displacement, the double-clamped stiffness of the first row
     (0.2 mm) is the linear solve's, 42.1 MN/m (measured 0.3 % above), the energy balance holds."""
-    sim, hist, push = slender_cyclic
+    sim, hist, push, rig = slender_cyclic
     u, v = hist["beam.ux"][push], hist["beam.fx"][push]
     np.testing.assert_allclose(u, S4.path(H, step=0.4e-3, n_amplitudes=2), atol=1e-12)
     assert u.min() < 0 < u.max()
     big = np.abs(u) > 0.5 * np.abs(u).max()
     assert np.all(np.sign(v[big]) == np.sign(u[big]))
-    assert v[0] / u[0] == pytest.approx(linear_stiffness(sim, held=(1, 3, 4, 5)), rel=0.01)
+    k = linear_stiffness(sim, rig.beam, held=(1, 3, 4, 5))
+    assert v[0] / u[0] == pytest.approx(k, rel=0.01)
     n_base = 0.52e6 * A + RHO * G * A * H
     assert np.abs(v).max() < 2 * rocking_shear(n_base, L, T, H, LAW.ft)   # both ends rock
     assert np.all(np.abs(hist["balance_error"]) < 0.01)
@@ -167,7 +167,7 @@ def test_slender_cyclic_reversal(slender_cyclic):
 def test_energy_per_cycle(slender_cyclic):
     """Two amplitudes, two cycles each: four cycles, each dissipating a non-negative energy,
     together everything dissipated during the push; the larger amplitude dissipates more."""
-    sim, hist, push = slender_cyclic
+    sim, hist, push, _ = slender_cyclic
     cycles = energy_per_cycle(hist, "beam.ux", push)
     assert [c["cycle"] for c in cycles] == [1, 2, 3, 4]
     amp = S4.amplitudes_m(H)[:2]
@@ -417,7 +417,7 @@ def test_interrupted_run_resumes(tmp_path, monkeypatch, squat):
     from dr_masonry.cli import main
     from dr_masonry import SolverError
     from dr_masonry.solver import Simulation
-    _, whole, _ = squat
+    _, whole, _, _ = squat
     params = dict(tiny(squat_wall), h5=str(tmp_path / "s5.h5"), frames=1)
     interrupt_after(monkeypatch, 9)
     with pytest.raises(KeyboardInterrupt):
@@ -439,7 +439,7 @@ def test_interrupted_run_resumes(tmp_path, monkeypatch, squat):
     # solver caps may change (the advice of a run stopped at its iteration cap)
     hists = []
     for h5 in (params["h5"], copy):
-        sim, hist, push = squat_wall.run(dict(params, h5=h5, resume=True, max_iter=150_000,
+        sim, hist, push, _ = squat_wall.run(dict(params, h5=h5, resume=True, max_iter=150_000,
                                               max_cuts=5))
         sim.close()
         hists.append(hist)
@@ -519,7 +519,7 @@ def test_resume_after_the_last_part_of_a_cut_increment(tmp_path, monkeypatch):
         init(self, *a, **k)
         self.output.checkpoint_s = 0.0
     params = dict(tiny(squat_wall), increments=6, frames=100, max_iter=500, max_cuts=8)
-    _, whole, _ = squat_wall.run(dict(params, h5=str(tmp_path / "whole.h5")))
+    _, whole, _, _ = squat_wall.run(dict(params, h5=str(tmp_path / "whole.h5")))
     assert whole["cut_iterations"].sum() > 0          # increments were cut
     monkeypatch.setattr(SolverOptions, "__init__", every_part)
     stopped, last_inside = [], [False]
@@ -540,7 +540,7 @@ def test_resume_after_the_last_part_of_a_cut_increment(tmp_path, monkeypatch):
         squat_wall.run(dict(params, h5=h5))
     assert open_result(h5).checkpoint()[2]["inside"]   # the checkpoint of the last part
     monkeypatch.setattr(increments, "increment", increment)
-    sim, hist, _ = squat_wall.run(dict(params, h5=h5, resume=True))
+    sim, hist, _, _ = squat_wall.run(dict(params, h5=h5, resume=True))
     sim.close()
     assert stopped and np.array_equal(hist["beam.ux"], whole["beam.ux"])
     assert np.allclose(hist["beam.fx"], whole["beam.fx"], rtol=1e-3, atol=1.0)
@@ -569,9 +569,9 @@ def test_checkpoint_between_frames(tmp_path, monkeypatch):
     png = crack_map(r, "checkpoint", str(tmp_path / "ck.png"), threshold=0.0)
     assert saved[png].axes[0].get_title() == "s5.h5: increment 6"
     monkeypatch.setattr(increments, "commit", COMMIT)
-    sim, hist, _ = squat_wall.run(dict(params, resume=True))
+    sim, hist, _, _ = squat_wall.run(dict(params, resume=True))
     sim.close()
-    sim, whole, _ = squat_wall.run(dict(params, h5=str(tmp_path / "whole.h5")))
+    sim, whole, _, _ = squat_wall.run(dict(params, h5=str(tmp_path / "whole.h5")))
     sim.close()
     # at the end of a run the checkpoint is the last frame's state: its fields, read from the
     # restart arrays, are the frame's (written from the solver's fields)
