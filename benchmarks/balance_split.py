@@ -107,7 +107,8 @@ def main(argv=None):
     params = common.start(DEFAULTS, __doc__, argv)
     from dr_masonry.scene import scene_params
     case = importlib.import_module(f"dr_masonry.cases.{params['scene']}")
-    p = scene_params(case.PARAMS, case.FAST, params["args"].split(), case.__doc__)
+    p = scene_params(case.PARAMS, case.FAST, params["args"].split(), case.__doc__,
+                     params["scene"])
     p.update(h5=None, progress=False)
     sim, stages = case.build(p)[:2]   # a scene with its own data returns it third
     out = split_rows(sim, stages, params["rows"])

@@ -80,7 +80,8 @@ def built_scene(scene, args, name):
     from dr_masonry.scene import scene_params
     mod = import_case(scene)
     run = scene_params(mod.PARAMS, getattr(mod, "FAST", None),
-                       [f"out={os.path.join(OUT, name)}", "maps="] + args.split(), mod.__doc__)
+                       [f"out={os.path.join(OUT, name)}", "maps=", "report=false"] + args.split(),
+                       mod.__doc__, scene)
     run["progress"] = False
     return mod.build(run)[:2]      # a scene with its own data returns it third
 

@@ -158,7 +158,8 @@ def report(params, res, found):
 
 
 def main(argv=None):
-    params = scene_params(PARAMS, None, sys.argv[1:] if argv is None else argv, __doc__)
+    params = scene_params(PARAMS, None, sys.argv[1:] if argv is None else argv, __doc__,
+                          "arch")
     sim, arch, res, found = run(params)
     print(report(params, res, found))
     hist = sim.history

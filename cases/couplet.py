@@ -66,7 +66,8 @@ def run(params):
 
 
 def main(argv=None):
-    params = scene_params(PARAMS, None, sys.argv[1:] if argv is None else argv, __doc__)
+    params = scene_params(PARAMS, None, sys.argv[1:] if argv is None else argv, __doc__,
+                          "couplet")
     sim, hist = run(params)
     u = hist["platen.uz"]
     s = hist["platen.fz"] / (L * T)

@@ -116,7 +116,8 @@ def run(params):
 
 
 def main(argv=None):
-    params = scene_params(PARAMS, None, sys.argv[1:] if argv is None else argv, __doc__)
+    params = scene_params(PARAMS, None, sys.argv[1:] if argv is None else argv, __doc__,
+                          "dry_wall")
     sim, blocks, base, res, how = run(params)
     ref, ref_mode = closed_form(params)
     head = (f"dry stack of {params['courses']} block(s) b/H = "

@@ -45,7 +45,7 @@ from dr_masonry.postprocess import cycle_text, energy_per_cycle
 from dr_masonry.protocols import S6, turning_points
 from dr_masonry.scene import (RUN_PARAMS, at_floor, choice, compare_curve, equilibrium_text,
                               finish, peaks_text, run_stages, scene_params, solver_summary,
-                              write_maps)
+                              write_maps, write_run_pages)
 from dr_masonry.units import MPa, kN, mm
 
 PARAMS = dict(
@@ -162,7 +162,8 @@ def curve(hist, rows):
 
 
 def main(argv=None):
-    params = scene_params(PARAMS, FAST, sys.argv[1:] if argv is None else argv, __doc__)
+    params = scene_params(PARAMS, FAST, sys.argv[1:] if argv is None else argv, __doc__,
+                          "out_of_plane_wall")
     sim, hist, push, scene = run(params)
     cycles = (energy_per_cycle(hist, "centre.uy", push, force="lateral_force")
               if params["protocol"] == "cyclic" else None)
@@ -172,7 +173,8 @@ def main(argv=None):
            cycles=cycles, label=f"this run ({params['protocol']})",
            reaction=support_reaction(sim, hist, push, scene) / kN, floor=at_floor(sim, hist, push),
            reference=compare_curve(params, "pre_increments", curve))
-    write_maps(sim, params, params["out"], squat_wall.MAPS, x, y, push)
+    write_maps(sim, params, params["out"], squat_wall.MAPS, x, y, push, VIEWS, CURVE)
+    write_run_pages(sim, params)
     print(report(sim, hist, push, scene))
     if cycles:
         print(cycle_text(cycles))

@@ -44,7 +44,7 @@ def run(params):
 
 
 def main(argv=None):
-    squat_wall.main(argv, __doc__, PARAMS, S4, "S4 slender wall")
+    squat_wall.main(argv, __doc__, PARAMS, S4, "S4 slender wall", "slender_wall")
 
 
 if __name__ == "__main__":

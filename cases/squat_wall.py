@@ -54,7 +54,8 @@ from dr_masonry.postprocess import cycle_text, energy_per_cycle
 from dr_masonry.protocols import S5, turning_points
 from dr_masonry.scene import (RUN_PARAMS, at_floor, choice, compare_curve, equilibrium_text,
                               finish, peaks_text, run_stages, scene_params, solver_options,
-                              solver_summary, with_penalty, write_maps)
+                              solver_summary, with_penalty, write_maps,
+                              write_run_pages)
 from dr_masonry.units import MPa, kN, mm
 
 PARAMS = dict(
@@ -76,6 +77,13 @@ PARAMS = dict(
     kc_factor=KC_PEN_FACTOR,    # compression penalty of the joints / knn (BENCHMARKS.md section 18)
     variant="reference",    # reference | PAR_A | PAR_B | PAR_C | PAR_D | PAR_E
     gravity=True,           # self-weight of wall and beam
+    bricks="reference",     # reference (plastic-damage law) | elastic (the same E and nu: the
+                            # bricks neither crack nor crush; joints alone fail)
+    beam_z="load",          # load: the beam carries the constant vertical force N and moves up
+                            # and down freely (the test's actuators) | held: its vertical
+                            # displacement is held after the pre-compression (N then varies)
+    beam_out_of_plane="held",   # held: the beam's out-of-plane displacement and rotations (y,
+                            # rx, rz) held | free: its rotations rx, rz free (y stays held)
     beam_height=0.20,       # steel loading beam height, m
     **RUN_PARAMS,
     fast=False,             # preset FAST: tiny 0.88 x 0.81 m coarse wall, few increments
@@ -182,9 +190,14 @@ def build(params, protocol=S5):
     kind = choice(params, "protocol", ("monotonic", "cyclic"))
     choice(params, "shear_damage", ("calibrated", "paper"))
     law, block = materials(params["variant"], params["shear_damage"])
+    if choice(params, "bricks", ("reference", "elastic")) == "elastic":
+        block = PlasticDamage.elastic(block.E, block.nu, block.density)
+    hold_z = choice(params, "beam_z", ("load", "held")) == "held"
+    out_of_plane = ("y",) + (("rx", "rz") if choice(params, "beam_out_of_plane",
+                                                    ("held", "free")) == "held" else ())
     sim, scene, pre = rig(params, law, block)
     beam = scene.beam
-    held = ("y", "rx", "rz") + (("ry",) if bc == "double_clamped" else ())
+    held = out_of_plane + (("ry",) if bc == "double_clamped" else ())
     pre += [Displacement(target=beam, dof="x", to=0.0, name="push")]
     pre += [Displacement(target=beam, dof=d, to=0.0) for d in held]
     H = scene.wall.height
@@ -195,7 +208,8 @@ def build(params, protocol=S5):
                              quarter_increments=params["quarter_increments"],
                              n_amplitudes=params["n_amplitudes"] or None)
     stages = [Stage("precompression", params["pre_increments"], pre, frames=params["pre_increments"]),
-              Stage("push", path.size, [Displacement(target=beam, dof="x", path=path, name="push")],
+              Stage("push", path.size, [Displacement(target=beam, dof="x", path=path, name="push")]
+                    + ([Displacement(target=beam, dof="z", name="beam_z")] if hold_z else []),
                     frames=params["frames"], frame_at=turning_points(path))]
     return sim, stages, scene
 
@@ -236,8 +250,9 @@ VIEWS = {"view_cracks": dict(camera="elevation", field="dt"),
          "view_crushing": dict(camera="elevation", field="dc")}
 
 
-def main(argv=None, doc=__doc__, defaults=PARAMS, protocol=S5, title="S5 squat wall"):
-    params = scene_params(defaults, FAST, sys.argv[1:] if argv is None else argv, doc)
+def main(argv=None, doc=__doc__, defaults=PARAMS, protocol=S5, title="S5 squat wall",
+         scene="squat_wall"):
+    params = scene_params(defaults, FAST, sys.argv[1:] if argv is None else argv, doc, scene)
     sim, hist, push, _ = run(params, protocol)
     cycles = (energy_per_cycle(hist, "beam.ux", push, force="beam.fx")
               if params["protocol"] == "cyclic" else None)
@@ -248,7 +263,8 @@ def main(argv=None, doc=__doc__, defaults=PARAMS, protocol=S5, title="S5 squat w
            cycles=cycles, label=f"this run ({params['protocol']})",
            reaction=base_reaction(hist, push) / kN, floor=at_floor(sim, hist, push),
            reference=compare_curve(params, "pre_increments", curve))
-    write_maps(sim, params, params["out"], MAPS, x, y, push)
+    write_maps(sim, params, params["out"], MAPS, x, y, push, VIEWS, CURVE)
+    write_run_pages(sim, params)
     print(report(sim, hist, push))
     if cycles:
         print(cycle_text(cycles))

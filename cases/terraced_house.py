@@ -50,7 +50,8 @@ from dr_masonry.postprocess import cycle_text, energy_per_cycle
 from dr_masonry.protocols import S7, turning_points
 from dr_masonry.scene import (RUN_PARAMS, at_floor, choice, compare_curve, equilibrium_text,
                               finish, peaks_text, run_stages, scene_params, solver_options,
-                              solver_summary, with_penalty, write_maps)
+                              solver_summary, with_penalty, write_maps,
+                              write_run_pages)
 from dr_masonry.units import kN, mm
 from dr_masonry.viz.plots import plot_history
 
@@ -193,7 +194,8 @@ def maps(house):
 
 
 def main(argv=None):
-    params = scene_params(PARAMS, FAST, sys.argv[1:] if argv is None else argv, __doc__)
+    params = scene_params(PARAMS, FAST, sys.argv[1:] if argv is None else argv, __doc__,
+                          "terraced_house")
     sim, hist, push, house = run(params)
     top = f"{house.floors[-1].name}.ux"
     # cycles of the half model: its energies with its own base shear (half the house's)
@@ -213,7 +215,8 @@ def main(argv=None):
                      ylabel="vertical reaction, half model (kN)",
                      title="vertical reactions (paper Fig. 26): P1 wide pier, P2 narrow pier,\n"
                            "W1, W2 transversal walls")
-    write_maps(sim, params, out, maps(house), x, y, push)
+    write_maps(sim, params, out, maps(house), x, y, push, VIEWS, CURVE)
+    write_run_pages(sim, params)
     print(report(sim, hist, push, house))
     if cycles:
         print("cycles of the half model (base shear and energies half the house's):\n"

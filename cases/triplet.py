@@ -83,7 +83,8 @@ def check(params):
 
 
 def main(argv=None):
-    params = scene_params(PARAMS, None, sys.argv[1:] if argv is None else argv, __doc__)
+    params = scene_params(PARAMS, None, sys.argv[1:] if argv is None else argv, __doc__,
+                          "triplet")
     law = JointLaw.reference()
     check(params)
     for s in [float(v) * MPa for v in params["sigmas"]]:

@@ -69,7 +69,8 @@ def run(params):
 
 
 def main(argv=None):
-    params = scene_params(PARAMS, None, sys.argv[1:] if argv is None else argv, __doc__)
+    params = scene_params(PARAMS, None, sys.argv[1:] if argv is None else argv, __doc__,
+                          "wallet")
     sim, strain, stress, _ = run(params)
     finish(sim, params["out"], x=strain * 1e3, y=stress / MPa, xlabel="strain (per mille)",
            ylabel="compressive stress (MPa)", title="S3 wallet",

@@ -12,16 +12,19 @@ from .solver import SolverError
 from .units import kN, mm
 
 
-def scene_params(defaults, fast, argv, doc):
+def scene_params(defaults, fast, argv, doc, scene):
     """Parameters of a scene's ``main``: ``key=value`` overrides of ``defaults``, on top of the
     ``fast`` preset when ``fast=true`` (``fast`` None: a scene without that parameter); ``h5``
-    next to ``out`` and the progress bar on."""
+    next to ``out``, the progress bar on and ``scene``, the case's name (stored with the
+    configuration: ``dr-masonry report`` and ``animate`` find the scene's curve and views by
+    it)."""
     params = parse_overrides(defaults, argv, doc)
     if params.get("fast"):              # the preset first, explicit overrides on top
         params = parse_overrides(with_preset(defaults, fast, True), argv, doc)
     check_protocol_keys(params, {a.partition("=")[0].strip() for a in argv})
     params["h5"] = output_path(params) + ".h5"
     params["progress"] = True
+    params["scene"] = scene
     return params
 
 
@@ -40,16 +43,21 @@ RUN_PARAMS = dict(
     resume_from=0,          # with resume: from the checkpoint kept after this increment instead
     replot=False,           # write the outputs (curve, CSV, VTK) of the run stored in out.h5, as
                             # far as it went (a stopped run, or one still writing), without running
-    maps="peak,end",        # crack and crushing maps (PNG) at these points: peak (the frame
-                            # nearest the largest |force|; both ways of a cyclic run), peak+,
-                            # peak-, end, increment numbers; "": none
+    maps="peak,end",        # crack and crushing maps and 3-D damage views (PNG) at these
+                            # points: peak (the frame nearest the largest |force|; both ways
+                            # of a cyclic run), peak+, peak-, end, increment numbers; "": none
+    report=True,            # write out_report.html: curve, views at the peaks and the end,
+                            # equilibrium certificate, energies, cycles, run time (the page of
+                            # `dr-masonry report`)
+    animate=False,          # write out.gif: the damaged structure beside the curve, one picture
+                            # per stored frame (the file of `dr-masonry animate`)
     compare="",             # results file of another run of the scene drawn on the curve (e.g.
                             # the monotonic run on the cyclic one), or a CSV of the curve's two
                             # columns in its plotted units (measured or published points)
 )
 #: parameters that may differ when a run is continued: how it is solved and written, not what
-SOLVER_KEYS = {"resume", "resume_from", "replot", "maps", "compare", "progress", "out", "h5",
-               "frames", "solver", *OPTION_KEYS}
+SOLVER_KEYS = {"resume", "resume_from", "replot", "maps", "report", "animate", "compare",
+               "progress", "out", "h5", "frames", "solver", *OPTION_KEYS}
 
 
 def choice(params, key, options):
@@ -277,13 +285,16 @@ def map_frames(result, points, named, two_sided=False):
     return out
 
 
-def write_maps(sim, params, out, views, x, force, rows):
-    """Crack and crushing maps ``{out}_{view}_{tag}.png`` of ``views`` ({view: keyword arguments
-    of :func:`dr_masonry.viz.plots.crack_map`}) at the points of ``params["maps"]``; the peaks
-    (:data:`MAP_NAMES`) are those of ``force`` (N) against the control displacement ``x`` (m),
-    one of each per row of ``rows`` (a bool mask of the history); each title gives the frame's
-    increment and displacement, and the peak's where the nearest frame is another increment.
-    Returns the written paths (none without a results file)."""
+def write_maps(sim, params, out, maps, x, force, rows, views=None, curve=None):
+    """Crack and crushing maps ``{out}_{name}_{tag}.png`` of ``maps`` ({name: keyword arguments
+    of :func:`dr_masonry.viz.plots.crack_map`}) and 3-D damage views ``{out}_{name}_{tag}.png``
+    of ``views`` ({name: keyword arguments of :func:`dr_masonry.viz.views.damage_view}`, a
+    scene's ``VIEWS``; ``curve``: its ``CURVE``, for the views' titles) at the points of
+    ``params["maps"]``; the peaks (:data:`MAP_NAMES`) are those of ``force`` (N) against the
+    control displacement ``x`` (m), one of each per row of ``rows`` (a bool mask of the
+    history); each map's title gives the frame's increment and displacement, and the peak's
+    where the nearest frame is another increment. Returns the written paths (none without a
+    results file)."""
     points = map_points(params)
     if not points or sim.output is None:
         return []
@@ -298,13 +309,35 @@ def write_maps(sim, params, out, views, x, force, rows):
     def where(k):
         return f"increment {k}" + (f", {at_inc[k] / mm:.2f} mm" if k in at_inc else "")
     paths = []
-    for tag, frame in map_frames(result, points, named, two_sided(force)):
+    frames = map_frames(result, points, named, two_sided(force))
+    for tag, frame in frames:
         k = result.frame_increment(frame)
         at = f"{tag}: {where(k)}" + (f" (the peak: {where(named[tag])})"
                                      if tag in named and named[tag] != k else "")
-        paths += [crack_map(result, frame, f"{out}_{view}_{tag}.png",
-                            title=f"{os.path.basename(out)} {view.replace('_', ' ')}, {at}", **kw)
-                  for view, kw in views.items()]
+        paths += [crack_map(result, frame, f"{out}_{name}_{tag}.png",
+                            title=f"{os.path.basename(out)} {name.replace('_', ' ')}, {at}", **kw)
+                  for name, kw in maps.items()]
+    if views:
+        from .viz.views import write_views
+        paths += write_views(result, out, frames, views, curve=curve)
+    return paths
+
+
+def write_run_pages(sim, params):
+    """With scene parameter ``report`` the run report ``{out}_report.html``
+    (:func:`dr_masonry.viz.report.write_report`), with ``animate`` the animation ``{out}.gif``
+    (:func:`dr_masonry.viz.animation.animate`) of the closed results file, for the scene
+    ``params["scene"]``. Returns the written paths (none without a results file)."""
+    if sim.output is None or not (params.get("report") or params.get("animate")):
+        return []
+    paths = []
+    if params.get("report"):
+        from .viz.report import write_report
+        paths.append(write_report(sim.output, params["out"] + "_report.html",
+                                  case=params.get("scene")))
+    if params.get("animate"):
+        from .viz.animation import animate
+        paths.append(animate(sim.output, params["out"] + ".gif", case=params.get("scene")))
     return paths
 
 

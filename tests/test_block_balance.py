@@ -18,7 +18,7 @@ from dr_masonry.solver.increments import LOOSE_BLOCK, predictor_motion
 def _fast_wall(tmp_path, block_tol):
     params = scene_params(squat_wall.PARAMS, squat_wall.FAST,
                           ["fast=true", f"block_tol={block_tol}", f"out={tmp_path}/w{block_tol}"],
-                          squat_wall.__doc__)
+                          squat_wall.__doc__, "squat_wall")
     params["progress"] = False
     sim, hist, _, _ = squat_wall.run(params, squat_wall.S5)
     return sim, hist
@@ -76,7 +76,7 @@ def test_solver_option_parameters_default_to_the_solver_defaults():
     defaults = SolverOptions().as_dict()
     assert {k: RUN_PARAMS[k] for k in OPTION_KEYS} == {k: defaults[k] for k in OPTION_KEYS}
     params = scene_params(squat_wall.PARAMS, squat_wall.FAST,
-                          ["stall_iter=3000", "block_tol=0", "coarse=false"], squat_wall.__doc__)
+                          ["stall_iter=3000", "block_tol=0", "coarse=false"], squat_wall.__doc__, "squat_wall")
     o = solver_options(params)
     assert (o.increments.stall_iter, o.convergence.block_tol, o.coarse.enabled) == (3000, 0.0,
                                                                                     False)

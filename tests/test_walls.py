@@ -342,7 +342,13 @@ def test_main_writes_outputs(tmp_path):
     assert (tmp_path / "s5_vtk" / "blocks.pvd").exists()
     maps = sorted(p.name for p in tmp_path.glob("s5_*.png"))
     assert maps == ["s5_cracks_end.png", "s5_cracks_peak.png", "s5_crushing_end.png",
-                    "s5_crushing_peak.png"]
+                    "s5_crushing_peak.png", "s5_view_cracks_end.png", "s5_view_cracks_peak.png",
+                    "s5_view_crushing_end.png", "s5_view_crushing_peak.png"]
+    # the run report, found by the scene the configuration records: one page of the run
+    assert r.config["scene"] == "squat_wall"
+    page = (tmp_path / "s5_report.html").read_text()
+    assert page.count("<img") == 1 + 4 and f"{len(r.history['increment'])}</td>" in page
+    assert not (tmp_path / "s5.gif").exists()      # animate=false by default
     # the same run drawn on another's curve: compare= reads its push rows
     from dr_masonry.scene import compare_curve
     x, y, label = compare_curve({"compare": str(out) + ".h5"}, "pre_increments", squat_wall.curve)
@@ -416,7 +422,6 @@ def test_interrupted_run_resumes(tmp_path, monkeypatch, squat):
     run carried to another machine) it gives the same rows, bit for bit."""
     from dr_masonry.cli import main
     from dr_masonry import SolverError
-    from dr_masonry.solver import Simulation
     _, whole, _, _ = squat
     params = dict(tiny(squat_wall), h5=str(tmp_path / "s5.h5"), frames=1)
     interrupt_after(monkeypatch, 9)
@@ -589,3 +594,26 @@ def test_checkpoint_between_frames(tmp_path, monkeypatch):
     assert open_result(params["h5"]).n_history == whole["increment"].size
     with pytest.raises(ValueError, match="checkpoint_s"):
         SolverOptions(checkpoint_s=-1.0)
+
+
+def test_beam_held_vertically_and_elastic_bricks():
+    """``beam_z=held`` holds the beam where the pre-compression left it (a Displacement of a
+    rigid point that no earlier stage set starts at the point's displacement, not at 0): its
+    vertical displacement stays that of the last pre-compression row to round-off while its
+    vertical force grows as the wall rocks and lifts against it; ``bricks=elastic`` leaves the
+    bricks undamaged at a peak that is then the joints' alone (within the reference run's:
+    here its bricks do not crack either)."""
+    params = dict(tiny(slender_wall), increments=4)
+    _, hist, push, rig = slender_wall.run(dict(params, beam_z="held"))
+    settled = hist["beam.uz"][~push][-1]
+    assert settled < 0 and np.all(np.abs(hist["beam.uz"][push] - settled) < 1e-12)
+    # the restraint's added compression (the beam's own weight is not in beam.fz)
+    assert hist["beam.fz"][push][-1] < 1.05 * hist["beam.fz"][~push][-1] < 0
+    _, free, free_push, _ = slender_wall.run(params)
+    # the constant load N, to the residual the tolerance leaves
+    assert np.ptp(free["beam.fz"][free_push]) < 1e-4 * rig.n_top
+    assert hist["beam.fx"][push].max() > free["beam.fx"][free_push].max()
+    _, elastic, e_push, _ = slender_wall.run(dict(params, bricks="elastic"))
+    assert elastic["max_dt"][-1] == 0 and elastic["max_dc"][-1] == 0
+    assert elastic["beam.fx"][e_push].max() == pytest.approx(free["beam.fx"][free_push].max(),
+                                                              rel=0.02)
