@@ -156,6 +156,16 @@ def own(sim, target, what):
                              f"node_set, or by hand)")
 
 
+def current(sim, ctl):
+    """Where a control that no earlier stage set starts: a Displacement of a rigid point's DOF at
+    the point's present displacement (so that ``Displacement(target=point, dof=d)`` without
+    ``to`` or ``path`` holds the point where the earlier stages left it), every other control at
+    0."""
+    if isinstance(ctl, L.Displacement) and isinstance(ctl.target, L.RigidPoint):
+        return float(sim.dyn.rpU[ctl.target.index, L.dof_index(ctl.dof, True)])
+    return 0.0
+
+
 def apply(sim, ctl, value):
     """Impose one control value on the arrays (before relaxing an increment)."""
     d = sim.dyn

@@ -28,7 +28,7 @@ def run_stage(sim, stage, where, first=0, starts=None):
     starts = dict(starts) if resumed else {}
     for ctl in stage.controls:
         key = C.key(ctl)
-        start = starts.setdefault(key, sim.values.get(key, 0.0))
+        start = starts.setdefault(key, sim.values.get(key, C.current(sim, ctl)))
         targets[key] = (ctl, ctl.values(start, n))
         if isinstance(ctl, (C.L.Indirect, C.L.Opening)):
             indirect = ctl
