@@ -7,8 +7,8 @@ plateau), then times ``relax`` for ``iters`` iterations with tol 0 (``repeats`` 
 median per iteration, and the best per node) and its parallel pieces: ``element_and_contact_forces``
 (hexahedra and contact points, one region), ``gather_pair`` (node forces, one region) and
 ``internal_forces`` (both, plus the energy sums); ``rest`` = iteration - internal forces (the
-residual, damping and update passes over the nodes and the serial remainder, BENCHMARKS.md section
-35); ``forces_full_update``: the forces again with every element through the full state update (the
+residual, damping and update passes over the nodes and the serial remainder);
+``forces_full_update``: the forces again with every element through the full state update (the
 pristine elements' skip switched off); ``hexahedra`` and ``contacts``: the two halves of the force
 kernel alone (the other set empty), also per hexahedron and per contact point. Every (threads,
 policy) setting runs in a process of its own, since OpenMP reads ``OMP_WAIT_POLICY`` when it starts.

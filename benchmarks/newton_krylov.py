@@ -21,8 +21,8 @@ control, whose load factor is an unknown too, are refused):
   force where the curvature turns negative) from the frozen state, with each preconditioner, for
   at most ``cg`` force evaluations: per iteration one secant product along the search direction
   (at the previous step length) and one true out-of-balance force; the evaluations it takes to
-  reach the solver's tolerance, or the ratio it has when the budget ends (BENCHMARKS.md section
-  65);
+  reach the solver's tolerance, or the ratio it has when the budget ends (BENCHMARKS.md,
+  "Nonlinear conjugate gradients from a frozen row");
 
 then lets the relaxation finish the row from the frozen state and reports its iterations (with
 those of the attempts it cut, if the stall rule cut the probed one). Run:

@@ -57,12 +57,13 @@ PARAMS = dict(
     increments=40,          # increments of the monotonic push
     grading=1.5,            # monotonic: i-th target = target * (i / increments) ** grading
     step=0.5 * mm,          # cyclic: largest displacement per increment, m (1 mm cut the peak
-                            # inside the 2 mm cycle 15 % low: BENCHMARKS.md section 31)
+                            # inside the 2 mm cycle 15 % low: docs/validation.md, S6)
     quarter_increments=2,   # cyclic: fewest increments per quarter cycle
     n_amplitudes=0,         # cyclic: run only the first n amplitudes (0: all)
     pre_increments=4,       # increments of the pre-compression stage
     mesh="coarse",          # coarse (1 x 1 x 1 hexahedra per brick) | fine (4 x 1 x 2)
-    kc_factor=KC_PEN_FACTOR,  # compression penalty of the joints / knn (BENCHMARKS.md section 18)
+    kc_factor=KC_PEN_FACTOR,  # compression penalty of the joints / knn (its model error:
+                            # docs/validation.md, "The compression penalty")
     gravity=True,
     beam_height=0.20,       # steel loading beam height, m
     **RUN_PARAMS,

@@ -25,14 +25,11 @@ its fracture energy; all of these), ``shear_damage=paper`` the literal eq. (7) o
 
 Run: ``python cases/squat_wall.py [key=value ...]`` (or ``dr-masonry run squat_wall``). The
 default, coarse monotonic run (one hexahedron per brick, 5260 nodes, 5036 contacts; 60 graded
-increments to 1 % drift: 30 put the peak 5.7 % low, BENCHMARKS.md section 11) took 1 min 31 s
-alone on 2 cores (2026-12-05; 64 increments, no cut, 118,270 iterations, 86 s of relaxation;
-section 63);
-``mesh=fine`` (CASES.md's 4 x 1 x 2 hexahedra per brick, 20000 nodes) costs about 3.5 times
-more per iteration and took 22 min 43 s alone on 2 cores (section 51, the code before section
-61); with ``floor_tol=1e-3 stall_iter=3000`` 12 min 11 s for the same peak and end force
-(section 59), 12 min 25 s on a 1.14 x slower machine with the code of section 61, 11 min 00 s
-with the return mapping's first guess (section 63).
+increments to 1 % drift: 30 put the peak 5.7 % low) takes about 1 min 40 s alone on 2 cores (64
+rows, no cut, 118,270 iterations), its 3-D views and run report about 5 s more;
+``mesh=fine`` (CASES.md's 4 x 1 x 2 hexahedra per brick, 20000 nodes) costs about 3.4 times more
+per iteration: 11 min 00 s with ``floor_tol=1e-3 stall_iter=3000`` (BENCHMARKS.md, "Scene run
+times").
 The energy balance error of these coarse increments reaches a few per cent (trapezoidal rule of
 the external work over large steps; it shrinks with the step, see tests/test_walls.py).
 ``fast=true`` runs a 0.88 x 0.81 m coarse wall in a few increments (test suite). The full
@@ -68,13 +65,14 @@ PARAMS = dict(
     increments=60,          # increments of the monotonic push (30: peak 5.7 % low)
     grading=1.5,            # monotonic: i-th target = drift * (i / increments) ** grading
     step=0.25 * mm,         # cyclic: largest displacement per increment, m (0.5 mm put the
-                            # peak of the 0.1 % cycles 6 % low: BENCHMARKS.md section 31)
+                            # peak of the 0.1 % cycles 6 % low)
     quarter_increments=2,   # cyclic: fewest increments per quarter cycle
     n_amplitudes=0,         # cyclic: run only the first n amplitudes (0: all)
     pre_increments=4,       # increments of the pre-compression stage
     mesh="coarse",          # coarse (1 x 1 x 1 hexahedra per brick) | fine (4 x 1 x 2)
     shear_damage="calibrated",  # calibrated | paper (JointLaw.shear_damage)
-    kc_factor=KC_PEN_FACTOR,    # compression penalty of the joints / knn (BENCHMARKS.md section 18)
+    kc_factor=KC_PEN_FACTOR,    # compression penalty of the joints / knn (its model error:
+                            # docs/validation.md, "The compression penalty")
     variant="reference",    # reference | PAR_A | PAR_B | PAR_C | PAR_D | PAR_E
     gravity=True,           # self-weight of wall and beam
     bricks="reference",     # reference (plastic-damage law) | elastic (the same E and nu: the

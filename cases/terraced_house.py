@@ -67,7 +67,8 @@ PARAMS = dict(
     gravity_increments=4,
     mesh="coarse",          # coarse (1 x 1 x 1 hexahedra per brick) | fine (4 x 1 x 2)
     slab_element=0.22,      # slab and foundation hexahedron size in plan, m
-    kc_factor=KC_PEN_FACTOR,  # compression penalty of the joints / knn (BENCHMARKS.md section 18)
+    kc_factor=KC_PEN_FACTOR,  # compression penalty of the joints / knn (its model error:
+                            # docs/validation.md, "The compression penalty")
     **RUN_PARAMS,
     fast=False,             # preset FAST: small coarse house of large blocks, few increments
     out="results/terraced_house",

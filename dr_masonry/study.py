@@ -42,7 +42,7 @@ from .params import ParameterError, _coerce, check_protocol_keys, with_preset
 from .results import ResultsError, make_folder
 
 #: keys the study sets itself in every variant's parameters
-_RESERVED = ("out", "h5", "progress")
+_RESERVED = ("out", "h5", "progress", "scene")
 
 
 @dataclass
@@ -210,7 +210,7 @@ def run_variant(scene, label, overrides, out, threads=1):
             numba.set_num_threads(max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS)))
             mod = load_case(scene)
             params = with_preset(mod.PARAMS, getattr(mod, "FAST", None), overrides.get("fast"))
-            params.update(overrides, out=out, h5=h5, progress=False)
+            params.update(overrides, out=out, h5=h5, progress=False, scene=scene)
             make_folder(os.path.dirname(out) or ".")
             sim = mod.run(params)[0]
             sim.close()

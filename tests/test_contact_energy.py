@@ -89,7 +89,7 @@ def test_forces_are_the_energy_gradient_on_the_face(pair):
 def test_forces_are_the_energy_gradient_off_the_face(pair):
     """Points whose slave node lies off its master face (gap0 = 0.03 m): the frame's turning
     over the offset is part of the forces (``offset_forces``); without it they were 27 % off the
-    gradient and carried a couple gap0 x F of 84-92 N m (BENCHMARKS.md section 32)."""
+    gradient and carried a couple gap0 x F of 84-92 N m."""
     cs, X, U = pair
     psi, f, _ = evaluate(cs, X, U)
     off = np.nonzero(np.abs(cs.gap0).max(axis=1) > 1e-9)[0]

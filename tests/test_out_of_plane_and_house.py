@@ -109,8 +109,7 @@ def test_s7_energy_balance_converges_with_the_step(s7):
     """The balance error is the trapezoidal rule's (external work of each step from the forces at
     its ends) at the kink of the joints' normal law: for a point that opens within a step, from
     the compression penalty kc to (1 - D) knn, the rule's work minus the energy it stores is
-    0.5 (kc - (1 - D) knn) u0 u1 < 0 (u0 < 0 < u1), O(step^2) per point (BENCHMARKS.md section
-    32). Halving the steps of the tiny house's push (the same path to 3 mm) must shrink it by
+    0.5 (kc - (1 - D) knn) u0 u1 < 0 (u0 < 0 < u1), O(step^2) per point. Halving the steps of the tiny house's push (the same path to 3 mm) must shrink it by
     more than the factor 2 of a first-order error: measured 0.95 % -> 0.08 %."""
     _, hist5, push5, _ = s7
     _, hist10, push10, _ = terraced_house.run(fast(terraced_house, increments=10))
@@ -231,7 +230,7 @@ def test_scene_input_errors():
 def test_s6_cyclic_default_resolves_its_first_peak():
     """The S6 scene's cyclic path moves 0.5 mm per increment, four increments to the 2 mm
     amplitude (1 mm steps cut the peak inside that cycle, at about 1.5 mm, 15 % low; 0.5 mm gives
-    it within 0.3 % of 0.25 mm steps: BENCHMARKS.md section 31)."""
+    it within 0.3 % of 0.25 mm steps)."""
     sim, stages, _ = out_of_plane_wall.build({**out_of_plane_wall.PARAMS, "protocol": "cyclic",
                                               "h5": None})
     path = stages[-1].controls[0].path
