@@ -330,14 +330,18 @@ def write_run_pages(sim, params):
     ``params["scene"]``. Returns the written paths (none without a results file)."""
     if sim.output is None or not (params.get("report") or params.get("animate")):
         return []
+    from .results import ResultsError
     paths = []
-    if params.get("report"):
-        from .viz.report import write_report
-        paths.append(write_report(sim.output, params["out"] + "_report.html",
-                                  case=params.get("scene")))
-    if params.get("animate"):
-        from .viz.animation import animate
-        paths.append(animate(sim.output, params["out"] + ".gif", case=params.get("scene")))
+    try:
+        if params.get("report"):
+            from .viz.report import write_report
+            paths.append(write_report(sim.output, params["out"] + "_report.html",
+                                      case=params.get("scene")))
+        if params.get("animate"):
+            from .viz.animation import animate
+            paths.append(animate(sim.output, params["out"] + ".gif", case=params.get("scene")))
+    except ResultsError as e:   # e.g. a packed copy without the frames that name its stages
+        warnings.warn(f"no run report or animation written: {e}", RuntimeWarning, stacklevel=2)
     return paths
 
 
