@@ -168,7 +168,7 @@ def test_sigterm_stops_a_scene_and_resume_finishes_it(tmp_path):
     are, a file that holds them with its checkpoint, and ``resume=true`` runs it to its end."""
     out = tmp_path / "s4"
     cmd = [sys.executable, "-m", "dr_masonry", "run", "slender_wall", "fast=true",
-           f"out={out}", "frames=1"]
+           f"out={out}", "frames=1", "maps=", "report=false"]
     env = dict(os.environ)
     env.pop("OMP_WAIT_POLICY", None)
     proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True,
