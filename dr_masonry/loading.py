@@ -244,14 +244,23 @@ class Opening(_Control):
     follows the target values (m), e.g. the two faces of a joint that opens. The opening is held
     during each relaxation (a constraint the relaxation is projected onto) and the factor is
     found by a secant iteration on the constraint's reaction, so that a softening branch that
-    turns back (a snap-back) is traced: docs/internals.md, "Decisions"."""
+    turns back (a snap-back) is traced: docs/internals.md, "Decisions". ``direction``: a vector
+    (3,) along which the opening is measured instead (normalised; e.g. a wall's diagonal, as a
+    diagonal transducer measures it); ``dof`` then names the axis of the pattern whose
+    out-of-balance the row checks."""
     pattern: object = None
     a: object = None
     b: object = None
     dof: str = "x"
+    direction: object = None
 
     def __post_init__(self):
         super().__post_init__()
+        if self.direction is not None:
+            v = finite_vector(f"control {self.label}: direction", self.direction, 3)
+            if not np.any(v):
+                raise LoadingError(f"control {self.label}: direction is the zero vector")
+            self.direction = v / np.linalg.norm(v)
         for side in ("a", "b"):
             if not isinstance(getattr(self, side), NodeSet):
                 raise LoadingError(f"control {self.label}: {side} must be a NodeSet "

@@ -109,3 +109,24 @@ def test_opening_control_input_errors():
     fixed = sim.node_set("left", np.flatnonzero(np.isclose(sim.model.nodes[:, 0], 0.0)))
     with pytest.raises(LoadingError, match="fixed or tied"):
         sim.run([Stage("s", 1, [Opening(pattern=pull, a=fixed, b=b, to=1e-5)])])
+    with pytest.raises(LoadingError, match="direction is the zero vector"):
+        Opening(pattern=pull, a=a, b=b, direction=(0, 0, 0), to=1e-5)
+    with pytest.raises(LoadingError, match="direction: .* must be 3 finite numbers"):
+        Opening(pattern=pull, a=a, b=b, direction=(1, 0), to=1e-5)
+    with pytest.raises(LoadingError, match="is fixed or tied to a rigid point in z"):
+        sim.run([Stage("s", 1, [Opening(pattern=pull, a=a, b=b, direction=(1, 0, 1),
+                                        to=1e-5)])])
+
+
+def test_opening_along_a_direction_is_the_projection_of_the_mean_displacements():
+    """The constraint of ``direction=(3, 0, 4)`` measures (mean U of b - mean U of a) . (0.6, 0,
+    0.8) on any displacement field, and ``direction=(2, 0, 0)`` the same opening as dof x."""
+    from dr_masonry.solver.controls import constraint
+    sim, end, (a, b) = specimen()
+    pull = PointLoad(target=end, dof="x", value=A, name="pull")
+    U = np.random.default_rng(1).normal(size=(sim.model.n_nodes, 3))
+    expect = (U[b.nodes].mean(0) - U[a.nodes].mean(0)) @ [0.6, 0.0, 0.8]
+    for direction, value in (((3, 0, 4), expect),
+                             ((2, 0, 0), U[b.nodes, 0].mean() - U[a.nodes, 0].mean())):
+        con = constraint(sim, Opening(pattern=pull, a=a, b=b, direction=direction, to=1e-5), 0.0)
+        assert (con.coef * U[con.node, con.dof]).sum() == pytest.approx(value, rel=1e-12)

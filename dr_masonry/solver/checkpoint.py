@@ -44,6 +44,7 @@ class Checkpoints:
             arrays.update(sim.sliding.state())
         meta = {"values": [[list(k), v] for k, v in sim.values.items()],
                 "factors": sim.factors, **energy_meta, "dctl_prev": sim.dctl_prev,
+                "dlam_prev": sim.dlam_prev, "opening_slope": sim.opening_slope,
                 "history": {k: v for k, v in sim.history.items()}, "patterns": [],
                 "stage": list(sim.stage_position), "inside": inside}
         for name, (pat, P, rpP) in sim.patterns.items():
@@ -99,6 +100,8 @@ def load(sim, increment=None):
     sim.values = {tuple(k): v for k, v in meta["values"]}
     sim.factors = dict(meta["factors"])
     sim.dctl_prev = meta["dctl_prev"]
+    sim.dlam_prev = meta.get("dlam_prev", 0.0)          # older files: no opening predictor
+    sim.opening_slope = meta.get("opening_slope")
     sim._checkpoint_stage = meta.get("stage")
     sim._checkpoint_inside = meta.get("inside", True)   # older files: may be
     sim.history = {k: list(v) for k, v in meta["history"].items()}

@@ -114,14 +114,14 @@ def check_opening(sim, ctl):
     """LoadingError unless the node sets of Opening ``ctl`` are this simulation's, free in its
     DOF (not fixed, not tied to a rigid point), and its pattern loads a free DOF; and unless the
     damping is viscous (the held constraint is in that loop only)."""
-    k = L.dof_index(ctl.dof, rotations=False)
     for side in (ctl.a, ctl.b):
         own(sim, side, f"control {ctl.label}")
-        held = side.nodes[sim._fixed[side.nodes, k] | (sim.dyn.tied[side.nodes] >= 0)]
-        if held.size:
-            raise L.LoadingError(f"control {ctl.label}: node {held[0]} of {side.name!r} is fixed "
-                                 f"or tied to a rigid point in {ctl.dof}: an opening control "
-                                 f"moves its nodes")
+        for k, _ in opening_axes(ctl):
+            held = side.nodes[sim._fixed[side.nodes, k] | (sim.dyn.tied[side.nodes] >= 0)]
+            if held.size:
+                raise L.LoadingError(f"control {ctl.label}: node {held[0]} of {side.name!r} is "
+                                     f"fixed or tied to a rigid point in {'xyz'[k]}: an opening "
+                                     f"control moves its nodes")
     if sim.options.damping.scheme != "viscous":
         raise L.LoadingError(f"control {ctl.label}: an opening control needs damping='viscous', "
                              f"not {sim.options.damping.scheme!r}")
@@ -131,15 +131,26 @@ def check_opening(sim, ctl):
                              f"any free DOF")
 
 
+def opening_axes(ctl):
+    """[(axis 0-2, weight)] of the opening of Opening ``ctl``: its DOF's axis, or the nonzero
+    components of its ``direction``."""
+    if ctl.direction is None:
+        return [(L.dof_index(ctl.dof, rotations=False), 1.0)]
+    return [(k, float(w)) for k, w in enumerate(ctl.direction) if w != 0.0]
+
+
 def constraint(sim, ctl, target):
     """The ``R.Constraint`` holding Opening ``ctl`` at ``target`` m: the mean displacement of
-    ``ctl.b`` minus that of ``ctl.a`` along its DOF."""
+    ``ctl.b`` minus that of ``ctl.a`` along its DOF (or its direction)."""
     from ..kernels.relaxation import Constraint
-    k = L.dof_index(ctl.dof, rotations=False)
     a, b = ctl.a.nodes, ctl.b.nodes
-    node = np.concatenate([a, b]).astype(np.int64)
-    coef = np.concatenate([np.full(a.size, -1.0 / a.size), np.full(b.size, 1.0 / b.size)])
-    return Constraint(node, np.full(node.size, k, np.int64), coef, float(target))
+    node, dof, coef = [], [], []
+    for k, w in opening_axes(ctl):
+        node += [a, b]
+        dof.append(np.full(a.size + b.size, k, np.int64))
+        coef += [np.full(a.size, -w / a.size), np.full(b.size, w / b.size)]
+    return Constraint(np.concatenate(node).astype(np.int64), np.concatenate(dof),
+                      np.concatenate(coef), float(target))
 
 
 def own(sim, target, what):

@@ -70,7 +70,9 @@ def increment(sim, stage, targets, goal, indirect, depth, parent_diss=None):
     t0 = time.perf_counter()
     if isinstance(indirect, C.L.Opening):
         key = C.key(indirect)
-        out = relax_opening(sim, C.constraint(sim, indirect, goal[key]), tol, max_iter, stall)
+        lam_before = float(snap[7][0])
+        out = relax_opening(sim, C.constraint(sim, indirect, goal[key]), tol, max_iter, stall,
+                            lam_before + _ratio(sim, dctl) * sim.dlam_prev)
     else:
         out = relax_increment(sim, ctrl, pc, tol, max_iter, stall)
     elapsed = time.perf_counter() - t0
@@ -98,6 +100,7 @@ def increment(sim, stage, targets, goal, indirect, depth, parent_diss=None):
                       f"driving force", RuntimeWarning, stacklevel=2)
     sim.du_prev = predictor_motion(sim, snap[0])
     sim.dctl_prev = dctl
+    sim.dlam_prev = float(sim.lam[0] - snap[7][0])
     commit(sim, out, elapsed, v.energies, v.balance)
     if depth > 0 and sim.checkpoints.due(sim):
         sim.checkpoints.write(sim, inside=True)   # a part of a cut increment (hours, some)
@@ -117,11 +120,21 @@ def _set_up(sim, targets, goal, start, indirect, u_before):
         ctrl[:], pc = C.control_dof(sim, indirect)
     # predictor: continue the previous increment's motion when the control keeps its direction
     dctl = sum(goal[k] - start[k] for k in goal)
-    if (sim.options.increments.predictor and sim.du_prev is not None and sim.dctl_prev != 0.0
-            and dctl * sim.dctl_prev > 0):
-        sim.dyn.U[:] += min(dctl / sim.dctl_prev, 2.0) * sim.du_prev * sim.dyn.free
+    r = _ratio(sim, dctl)
+    if r and sim.du_prev is not None:
+        sim.dyn.U[:] += r * sim.du_prev * sim.dyn.free
     C.drive(sim, [targets[k][0] for k in goal if goal[k] != start[k]], indirect)
     return ctrl, pc, dctl
+
+
+def _ratio(sim, dctl):
+    """The predictor's share of the previous increment's motion (and, for an opening control,
+    of its change of load factor) for an increment that moves the controls by ``dctl``: their
+    ratio, at most 2, where the control keeps its direction; else 0."""
+    if (sim.options.increments.predictor and sim.dctl_prev != 0.0
+            and dctl * sim.dctl_prev > 0):
+        return min(dctl / sim.dctl_prev, 2.0)
+    return 0.0
 
 
 def predictor_motion(sim, u_before):

@@ -120,9 +120,12 @@ def relax_increment(sim, ctrl, pc, tol, max_iter, stall, con=None):
 
 #: secant steps on the load factor of an opening control before the attempt counts as stalled
 SECANT_STEPS = 12
+#: a relaxation of an opening control's secant runs to tol / POLISH once the constraint's reaction
+#: is within POLISH x its tolerance (:func:`relax_opening`)
+POLISH = 4.0
 
 
-def relax_opening(sim, con, tol, max_iter, stall):
+def relax_opening(sim, con, tol, max_iter, stall, lam0):
     """Relax an increment of an opening control: hold the constraint ``con`` (``R.Constraint``)
     and find the factor ``sim.lam`` of the control's pattern at which the constraint carries no
     force, by a secant iteration on its reaction, each step one relaxation from the last one's
@@ -130,14 +133,19 @@ def relax_opening(sim, con, tol, max_iter, stall):
     increment's iterations and damped energy; a secant that does not bring the reaction within
     ``tol`` x the reference force in ``SECANT_STEPS`` steps ends as ``ST_STALLED``.
 
-    The first trial is the factor the increment starts with; the second steps it by the secant
-    slope of the previous increment (``sim.opening_slope``, reaction N per unit factor) or, at
-    the first increment, by the reaction over the pattern's total force."""
+    The first trial is ``lam0`` (the predictor's); the second steps it by the slope kept from
+    the previous increment (``sim.opening_slope``, reaction N per unit factor: that of its
+    widest secant pair, the least disturbed by the relaxations' own residual) or, at the first
+    increment, by the reaction over the pattern's total force. Once the reaction is within
+    ``POLISH`` x its tolerance the relaxations run to ``tol / POLISH``: the reaction of a
+    relaxation stopped at ``tol`` is uncertain by about its tolerance."""
     ctrl = np.zeros(3, dtype=np.int64)
     done, damped = 0, 0.0
-    lam_a, mu_a = None, None
+    lam_a, mu_a, wide = None, None, 0.0
+    sim.lam[0] = lam0
+    inner = tol
     for step in range(SECANT_STEPS):
-        out = relax_increment(sim, ctrl, 1.0, tol, max_iter, stall, con)
+        out = relax_increment(sim, ctrl, 1.0, inner, max_iter - done, stall, con)
         done += out.iterations
         damped += out.damped
         total = out._replace(iterations=done, damped=damped)
@@ -146,13 +154,23 @@ def relax_opening(sim, con, tol, max_iter, stall):
         lam_b, mu_b = float(sim.lam[0]), out.reaction
         if abs(mu_b) <= tol * out.ref:
             return total
+        near = abs(mu_b) <= POLISH * tol * out.ref
+        if near:
+            inner = tol / POLISH
+        if near and lam_a is not None and mu_a * mu_b < 0 and sim.opening_slope and (
+                abs((lam_b - lam_a) * sim.opening_slope) <= tol * out.ref):
+            return total   # the factor is bracketed to within its tolerance
         if lam_a is None or mu_b == mu_a:
             slope = sim.opening_slope
             if slope is None or slope == 0.0:
                 slope = -(np.abs(sim.dyn.P).sum() + np.abs(sim.dyn.rpP).sum())
         else:
             slope = (mu_b - mu_a) / (lam_b - lam_a)
-            sim.opening_slope = slope
+            if abs(lam_b - lam_a) >= wide:
+                wide = abs(lam_b - lam_a)
+                sim.opening_slope = slope
         lam_a, mu_a = lam_b, mu_b
         sim.lam[0] = lam_b - mu_b / slope
+        if done >= max_iter:
+            break
     return total._replace(status=R.ST_STALLED)

@@ -200,6 +200,7 @@ class Simulation:
         self.du_prev = None
         self.dctl_prev = 0.0
         self.opening_slope = None   # opening control: reaction N per unit factor (secant)
+        self.dlam_prev = 0.0        # opening control: the last increment's change of factor
         self.writer = None
         if self.output is not None:
             make_folder(os.path.dirname(os.path.abspath(self.output)))

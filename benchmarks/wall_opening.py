@@ -1,0 +1,94 @@
+"""The opening control on a wall: the S5 main job pushed by a held diagonal elongation.
+
+The coarse S5 squat wall (the main job's model and pre-compression) is pushed by the beam's
+horizontal force, its factor found so that the mean displacement of the top-right corner brick
+minus that of the bottom-left one, along the line joining them, follows ``to`` m in ``n`` equal
+increments from its value after the pre-compression (a diagonal transducer's control,
+``loading.Opening(direction=...)``). Each relaxation of the secant on the factor is traced: the
+factor (kN), the constraint's reaction (N) against its tolerance tol x the reference force, the
+iterations. It shows where the secant meets its tolerance and where it cannot (docs/internals.md,
+"Decisions"): once joints crack, the reaction at a fixed factor scatters by more than the
+tolerance, so that no factor brings it within tolerance.
+
+Run: ``python benchmarks/wall_opening.py [n=30 to=0.003]``; prints the rows (iterations,
+relaxations, beam displacement, base shear) and the trace of the increment that stopped the run.
+"""
+import sys
+import time
+
+import numpy as np
+
+from dr_masonry import Force, Opening, Stage
+from dr_masonry.cases import squat_wall as S
+from dr_masonry.loading import PointLoad
+from dr_masonry.solver import SolverError
+from dr_masonry.solver import relaxing
+
+KN = 1e3
+
+
+def corner_blocks(sim, wall):
+    """The wall's bricks nearest its bottom-left and top-right corners (x-z)."""
+    m = sim.model
+    cent = np.array([m.nodes[m.block_nodes([b])].mean(0) for b in range(m.n_blocks)])
+    inside = np.flatnonzero((cent[:, 2] > 0) & (cent[:, 2] < wall.height))
+    pick = [inside[np.argmin(np.hypot(cent[inside, 0] - x, cent[inside, 2] - z))]
+            for x, z in ((0.0, 0.0), (wall.length, wall.height))]
+    return pick, cent[pick[1]] - cent[pick[0]]
+
+
+def main(argv):
+    args = dict(a.split("=", 1) for a in argv)
+    n, to = int(args.get("n", 30)), float(args.get("to", 3e-3))
+    sim, stages, rig = S.build(dict(S.PARAMS, h5=None, progress=False))
+    (bl, tr), axis = corner_blocks(sim, rig.wall)
+    a = sim.node_set("bottom_left", sim.model.block_nodes([bl]))
+    b = sim.node_set("top_right", sim.model.block_nodes([tr]))
+    sim.run([stages[0]])
+    e = axis / np.linalg.norm(axis)
+    d0 = float((sim.dyn.U[b.nodes].mean(0) - sim.dyn.U[a.nodes].mean(0)) @ e)
+    trace = []
+    plain = relaxing.relax_increment
+
+    def traced(sim_, ctrl, pc, tol, max_iter, stall, con=None):   # one secant step
+        lam = float(sim_.lam[0])
+        out = plain(sim_, ctrl, pc, tol, max_iter, stall, con)
+        trace.append((sim_.increment + 1, lam, out.reaction, tol * out.ref, out.iterations))
+        return out
+    relaxing.relax_increment = traced
+    push = Stage("push", n, [
+        Opening(pattern=PointLoad(target=rig.beam, dof="x", value=KN, name="shear"), a=a, b=b,
+                direction=e, dof="x", path=d0 + to * np.arange(1, n + 1) / n, name="diagonal"),
+        Force(target=rig.beam, dof="x", to=0.0, name="beam_x_free")], frames=n)
+    t = time.perf_counter()
+    stopped = None
+    try:
+        sim.run([push])
+    except SolverError as err:
+        stopped = str(err)
+    wall_s = time.perf_counter() - t
+    h = {k: np.asarray(v) for k, v in sim.history.items()}
+    rows = h["increment"] > stages[0].increments
+    steps = {}
+    for inc, *_ in trace:
+        steps[inc] = steps.get(inc, 0) + 1
+    print(f"S5 coarse, diagonal {np.degrees(np.arctan2(e[2], e[0])):.1f} deg, {n} increments "
+          f"of {to / n * 1e3:.3f} mm; {wall_s:.0f} s")
+    print("| row | iterations | relaxations | beam ux (mm) | base shear (kN) |")
+    print("|---|---|---|---|---|")
+    for inc, it, ux, fx in zip(h["increment"][rows], h["iterations"][rows],
+                               h["beam.ux"][rows], h["beam.fx"][rows]):
+        print(f"| {inc:.0f} | {it:,.0f} | {steps.get(int(inc), 0)} | {ux * 1e3:.3f} | "
+              f"{fx / KN:.2f} |")
+    if stopped:
+        print("stopped:", stopped)
+        last = trace[-1][0]
+        print("| factor (kN) | reaction (N) | tolerance (N) | iterations |")
+        print("|---|---|---|---|")
+        for inc, lam, mu, tol, it in trace:
+            if inc == last:
+                print(f"| {lam:.3f} | {mu:.1f} | {tol:.1f} | {it:,} |")
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
