@@ -70,9 +70,7 @@ def increment(sim, stage, targets, goal, indirect, depth, parent_diss=None):
     t0 = time.perf_counter()
     if isinstance(indirect, C.L.Opening):
         key = C.key(indirect)
-        lam_before = float(snap[7][0])
-        out = relax_opening(sim, C.constraint(sim, indirect, goal[key]), tol, max_iter, stall,
-                            lam_before + _ratio(sim, dctl) * sim.dlam_prev)
+        out = relax_opening(sim, C.constraint(sim, indirect, goal[key]), tol, max_iter, stall)
     else:
         out = relax_increment(sim, ctrl, pc, tol, max_iter, stall)
     elapsed = time.perf_counter() - t0
@@ -107,9 +105,9 @@ def increment(sim, stage, targets, goal, indirect, depth, parent_diss=None):
 
 
 def _set_up(sim, targets, goal, start, indirect, u_before):
-    """Impose the controls at ``goal``, assemble the loads, predict the displacements and mark
-    what drives the increment; returns (ctrl (3,) int64, pc N: the indirect control of
-    ``R.relax``, the control's change)."""
+    """Impose the controls at ``goal``, assemble the loads, predict the displacements (and an
+    opening control's factor) and mark what drives the increment; returns (ctrl (3,) int64,
+    pc N: the indirect control of ``R.relax``, the control's change)."""
     for key, val in goal.items():
         C.apply(sim, targets[key][0], val)
         sim.values[key] = val
@@ -118,19 +116,22 @@ def _set_up(sim, targets, goal, start, indirect, u_before):
     pc = 1.0
     if isinstance(indirect, C.L.Indirect):
         ctrl[:], pc = C.control_dof(sim, indirect)
-    # predictor: continue the previous increment's motion when the control keeps its direction
+    # predictor: continue the previous increment's motion (and an opening control's change of
+    # factor) when the control keeps its direction
     dctl = sum(goal[k] - start[k] for k in goal)
     r = _ratio(sim, dctl)
     if r and sim.du_prev is not None:
         sim.dyn.U[:] += r * sim.du_prev * sim.dyn.free
+    if isinstance(indirect, C.L.Opening):
+        sim.lam[0] += r * sim.dlam_prev
     C.drive(sim, [targets[k][0] for k in goal if goal[k] != start[k]], indirect)
     return ctrl, pc, dctl
 
 
 def _ratio(sim, dctl):
-    """The predictor's share of the previous increment's motion (and, for an opening control,
-    of its change of load factor) for an increment that moves the controls by ``dctl``: their
-    ratio, at most 2, where the control keeps its direction; else 0."""
+    """The predictor's share of the previous increment's motion and change of factor for an
+    increment that moves the controls by ``dctl``: their ratio, at most 2, where the control
+    keeps its direction; else 0."""
     if (sim.options.increments.predictor and sim.dctl_prev != 0.0
             and dctl * sim.dctl_prev > 0):
         return min(dctl / sim.dctl_prev, 2.0)

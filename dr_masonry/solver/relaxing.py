@@ -125,7 +125,7 @@ SECANT_STEPS = 12
 POLISH = 4.0
 
 
-def relax_opening(sim, con, tol, max_iter, stall, lam0):
+def relax_opening(sim, con, tol, max_iter, stall):
     """Relax an increment of an opening control: hold the constraint ``con`` (``R.Constraint``)
     and find the factor ``sim.lam`` of the control's pattern at which the constraint carries no
     force, by a secant iteration on its reaction, each step one relaxation from the last one's
@@ -133,7 +133,8 @@ def relax_opening(sim, con, tol, max_iter, stall, lam0):
     increment's iterations and damped energy; a secant that does not bring the reaction within
     ``tol`` x the reference force in ``SECANT_STEPS`` steps ends as ``ST_STALLED``.
 
-    The first trial is ``lam0`` (the predictor's); the second steps it by the slope kept from
+    The first trial is the factor the increment starts with (the predictor's: the last
+    increment's change continued, ``increments._set_up``); the second steps it by the slope kept from
     the previous increment (``sim.opening_slope``, reaction N per unit factor: that of its
     widest secant pair, the least disturbed by the relaxations' own residual) or, at the first
     increment, by the reaction over the pattern's total force. Once the reaction is within
@@ -142,7 +143,6 @@ def relax_opening(sim, con, tol, max_iter, stall, lam0):
     ctrl = np.zeros(3, dtype=np.int64)
     done, damped = 0, 0.0
     lam_a, mu_a, wide = None, None, 0.0
-    sim.lam[0] = lam0
     inner = tol
     for step in range(SECANT_STEPS):
         out = relax_increment(sim, ctrl, 1.0, inner, max_iter - done, stall, con)
