@@ -14,7 +14,8 @@ from numba.core import event
 
 from dr_masonry.interrupts import Terminated, terminate_as_interrupt, uninterrupted
 from dr_masonry.results import CHECKPOINT_NEW, ResultWriter, open_result
-from conftest import write_fake_result
+from conftest import gravity, tiny_wall, write_fake_result
+from dr_masonry.kernels import relaxation as R
 
 
 @pytest.fixture(autouse=True)
@@ -152,6 +153,25 @@ def test_a_kill_while_a_checkpoint_is_replaced_leaves_one(tmp_path):
     ResultWriter(p, None, {}, mode="a").close()
     with h5py.File(p, "r") as f:
         assert "checkpoint" in f and CHECKPOINT_NEW not in f
+
+
+def test_a_signal_while_a_relaxation_returns_stops_the_run(monkeypatch):
+    """SIGTERM while Numba boxes the ``Exit`` a relaxation call returns (by calling its class:
+    Python code, where the handler runs) stops the run with :class:`Terminated`: raised there it
+    ended the process with a segmentation fault (without the fix this test crashes pytest)."""
+    new, sent = R.Exit.__new__, []
+
+    def signal_once(cls, *fields):
+        if not sent:
+            sent.append(1)
+            os.kill(os.getpid(), signal.SIGTERM)
+        return new(cls, *fields)
+    sim = tiny_wall()
+    monkeypatch.setattr(R.Exit, "__new__", staticmethod(signal_once))
+    with pytest.raises(Terminated):
+        with terminate_as_interrupt():
+            sim.run(gravity())
+    assert sent == [1] and sim.increment == 0
 
 
 def _rows(path):

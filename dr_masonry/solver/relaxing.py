@@ -4,6 +4,12 @@ corrections, in calls short enough to keep Python responsive.
 
 :func:`relax_increment` is the only caller of the loop kernels in a run; it returns the attempt's
 ``kernels.relaxation.Exit`` with the attempt's totals.
+
+The loop kernels are called with SIGINT and SIGTERM held to their return
+(:func:`~dr_masonry.interrupts.uninterrupted`): Numba boxes a returned namedtuple (``Exit``,
+``Progress``) by calling its class, Python code in which a signal's handler runs, and the
+``KeyboardInterrupt`` it raises there ended the process with a segmentation fault (Numba 0.68)
+instead of the stop between two calls that a run promises (``tests/test_interrupts.py``).
 """
 from __future__ import annotations
 
@@ -12,6 +18,7 @@ from contextlib import contextmanager
 import numba
 import numpy as np
 
+from ..interrupts import uninterrupted
 from ..kernels import relaxation as R
 
 #: most iterations of one compiled ``relax`` call (rounded down to a multiple of check_every):
@@ -53,7 +60,8 @@ def _loop(damping, con):
     def loop(mesh, cont, dyn, lam, ctrl, pc, crit, pr, state):
         return D.relax_scheme(mesh, cont, dyn, lam, ctrl, pc, code, damping.alpha, crit, pr,
                               state)
-    return loop, D.start_state(code, damping.alpha)
+    with uninterrupted():   # a namedtuple returned (module docstring)
+        return loop, D.start_state(code, damping.alpha)
 
 
 def relax_increment(sim, ctrl, pc, tol, max_iter, stall, con=None):
@@ -107,7 +115,8 @@ def relax_increment(sim, ctrl, pc, tol, max_iter, stall, con=None):
             crit = R.Criteria(float(tol), float(sim.ref_floor), float(c.block_tol),
                               float(c.gap_tol), c.check_every, int(stall), 0.5 * sim.size,
                               float(max_iter - done), min(span_end - done, call))
-            out, pr, state = loop(sim.mesh, sim.cont, d, sim.lam, ctrl, pc, crit, pr, state)
+            with uninterrupted():   # namedtuples returned (module docstring)
+                out, pr, state = loop(sim.mesh, sim.cont, d, sim.lam, ctrl, pc, crit, pr, state)
             done += out.iterations
             damped += out.damped
             total = out._replace(iterations=done, damped=damped)
