@@ -257,14 +257,20 @@ def peak_increments(increments, force):
         ("peak-", np.argmin(force)))}
 
 
-def map_frames(result, points, named, two_sided=False):
+def map_frames(result, points, named, two_sided=False, among=None):
     """(tag, frame) of each of ``points`` (:func:`map_points`) in ``result``: the frame nearest
     the increment of a name in ``named`` ({name: increment}; tag: the name) or of an increment
-    number (tag: the frame's increment), and for "end" the last frame, or the last checkpoint
-    where the run stopped after it ("checkpoint"); with ``two_sided`` (a cyclic run) "peak"
-    stands for "peak+" and "peak-"; points without a stored state are left out."""
+    number (tag: the frame's increment), the later of two as near, and for "end" the last frame,
+    or the last checkpoint where the run stopped after it ("checkpoint"); with ``two_sided`` (a
+    cyclic run) "peak" stands for "peak+" and "peak-"; ``among``: the increments whose frames a
+    peak or a numbered point may take (the rows of the curve, so that a peak of the push is not
+    drawn from a frame of the pre-compression before it; None, or none of them framed: any
+    frame); points without a stored state are left out."""
     from .results import CHECKPOINT, ResultsError
     ids = np.asarray(result.frame_ids)
+    pick = np.arange(ids.size)
+    if among is not None and np.isin(ids, among).any():
+        pick = np.flatnonzero(np.isin(ids, among))
     try:
         ck = result.frame_increment(CHECKPOINT)
     except ResultsError:
@@ -280,7 +286,8 @@ def map_frames(result, points, named, two_sided=False):
         for q in (("peak+", "peak-") if two_sided and p == "peak" else (p,)):
             inc = q if isinstance(q, int) else named.get(q)
             if ids.size and inc is not None:
-                k = int(np.argmin(np.abs(ids - inc)))
+                d = np.abs(ids[pick] - inc)
+                k = int(pick[np.flatnonzero(d == d.min())[-1]])
                 out.append((str(ids[k]) if isinstance(q, int) else q, k))
     return out
 
@@ -309,7 +316,7 @@ def write_maps(sim, params, out, maps, x, force, rows, views=None, curve=None):
     def where(k):
         return f"increment {k}" + (f", {at_inc[k] / mm:.2f} mm" if k in at_inc else "")
     paths = []
-    frames = map_frames(result, points, named, two_sided(force))
+    frames = map_frames(result, points, named, two_sided(force), among=inc)
     for tag, frame in frames:
         k = result.frame_increment(frame)
         at = f"{tag}: {where(k)}" + (f" (the peak: {where(named[tag])})"

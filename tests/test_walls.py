@@ -409,6 +409,14 @@ def test_map_points_and_frames():
                                                              ("10", 1), ("15", 2)]
     # a run loaded both ways: "peak" maps both directions' peaks
     assert map_frames(r, ["peak"], named, two_sided=True) == [("peak+", 0), ("peak-", 1)]
+    # a peak of the push takes a frame of the push's rows where one is (not the precompression's
+    # frame 5 for a peak at 6); none of them framed: any frame
+    assert map_frames(r, ["peak", 9], {"peak": 6}, among=[7, 8, 9, 10, 11]) == [("peak", 1),
+                                                                              ("10", 1)]
+    assert map_frames(r, ["peak"], {"peak": 6}, among=[1, 2]) == [("peak", 0)]
+    r.frame_ids = [4, 6, 15]   # of two frames as near, the later
+    assert map_frames(r, ["peak"], {"peak": 5}) == [("peak", 1)]
+    r.frame_ids = [5, 10, 15]
     r.ck = 15   # the checkpoint of the last frame: the frame
     assert map_frames(r, ["end"], named) == [("end", 2)]
     r.frame_ids, r.ck = [], None   # nothing stored: no map

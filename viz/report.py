@@ -81,7 +81,7 @@ def peak_frames(result, curve, rows, points=("peak", "end")):
     from dr_masonry.scene import map_frames, peak_increments, two_sided
     y = np.asarray(result.history[curve["y"]], dtype=float)[rows] * curve.get("yscale", 1.0)
     inc = np.asarray(result.history["increment"])[rows].astype(int)
-    return map_frames(result, list(points), peak_increments(inc, y), two_sided(y))
+    return map_frames(result, list(points), peak_increments(inc, y), two_sided(y), among=inc)
 
 
 def _png(path):
