@@ -7,6 +7,10 @@ Run: ``python docs/make_views.py FILE NAME [FILE NAME ...]``: for each results f
     dr-masonry run squat_wall out=results/squat_wall
     dr-masonry run terraced_house fast=true out=results/terraced_house_fast
     python docs/make_views.py results/squat_wall.h5 s5 results/terraced_house_fast.h5 s7_fast
+    dr-masonry run out_of_plane_wall floor_tol=1e-3 frames=1 out=results/out_of_plane_wall
+    python docs/make_views.py results/out_of_plane_wall.h5 s6
+
+and the full S7 runs' (README, "Full protocols", with ``frames=1``) as ``s7_plus`` and ``s7_minus``.
 """
 import os
 import sys
