@@ -268,9 +268,9 @@ def map_frames(result, points, named, two_sided=False, among=None):
     frame); points without a stored state are left out."""
     from .results import CHECKPOINT, ResultsError
     ids = np.asarray(result.frame_ids)
-    pick = np.arange(ids.size)
-    if among is not None and np.isin(ids, among).any():
-        pick = np.flatnonzero(np.isin(ids, among))
+    pick = np.flatnonzero(np.isin(ids, among)) if among is not None else ids[:0]
+    if not pick.size:
+        pick = np.arange(ids.size)
     try:
         ck = result.frame_increment(CHECKPOINT)
     except ResultsError:
