@@ -70,10 +70,10 @@ def test_block_tol_is_validated(value):
 
 
 def test_solver_option_parameters_default_to_the_solver_defaults():
-    """Every scene parameter that is a SolverOptions field has the solver's default, and a scene's
-    value reaches the options of a run."""
+    """Every scene parameter that is a SolverOptions field has the solver's default (``alpha``:
+    None, the damping scheme's own), and a scene's value reaches the options of a run."""
     assert set(OPTION_KEYS) <= set(RUN_PARAMS)
-    defaults = SolverOptions().as_dict()
+    defaults = SolverOptions.defaults()
     assert {k: RUN_PARAMS[k] for k in OPTION_KEYS} == {k: defaults[k] for k in OPTION_KEYS}
     params = scene_params(squat_wall.PARAMS, squat_wall.FAST,
                           ["stall_iter=3000", "block_tol=0", "coarse=false"], squat_wall.__doc__, "squat_wall")

@@ -36,7 +36,7 @@ MAT = PlasticDamage.elastic(10e9, 0.2, 2000.0)
     ("coarse", 1, r"coarse=1: must be True, False or 'auto'"),
     ("damping", "viscus", r"damping='viscus': valid values are"),
     ("floor_tol", 1e-5, r"floor_tol=1e-05: must be a finite number 0 \(off\) or in \[tol"),
-    ("floor_tol", 2.0, r"floor_tol=2.0: must be a finite number 0 \(off\) or in \[tol = 0.0001, "
+    ("floor_tol", 2.0, r"floor_tol=2.0: must be a finite number 0 \(off\) or in \[tol = 5e-05, "
                        r"0.1\]"),                                    # was run: any row accepted
     ("gap_tol", 1.0, r"gap_tol=1.0: must be a finite number in \[0, 1\) \(0: off\)"),
 ])
