@@ -28,8 +28,8 @@ default, coarse monotonic run (one hexahedron per brick, 5260 nodes, 5036 contac
 increments to 1 % drift: 30 put the peak 5.4 % low) takes about 1 min 45 s alone on 2 cores (64
 rows, no cut, 145,630 iterations), its 3-D views and run report about 5 s more;
 ``mesh=fine`` (CASES.md's 4 x 1 x 2 hexahedra per brick, 20000 nodes) costs about 3.4 times more
-per iteration: 11 min 00 s with ``floor_tol=1e-3 stall_iter=3000`` and version 0.1.0's
-``tol=1e-4 alpha=1`` (BENCHMARKS.md, "Scene run times").
+per iteration: 15 min 53 s on one thread with ``floor_tol=1e-3 stall_iter=3000`` (BENCHMARKS.md,
+"Scene run times").
 The energy balance error of these coarse increments reaches a few per cent (trapezoidal rule of
 the external work over large steps; it shrinks with the step, see tests/test_walls.py).
 ``fast=true`` runs a 0.88 x 0.81 m coarse wall in a few increments (test suite). The full
