@@ -10,7 +10,10 @@ iterations. It shows where the secant meets its tolerance and where it cannot (d
 "Decisions"): once joints crack, the reaction at a fixed factor scatters by more than the
 tolerance, so that no factor brings it within tolerance.
 
-Run: ``python benchmarks/wall_opening.py [n=30 to=0.003]``; prints the rows (iterations,
+``rate`` > 0 (``Opening.rate``) lets the factor relax with the motion instead, one relaxation per
+increment.
+
+Run: ``python benchmarks/wall_opening.py [n=30 to=0.003 rate=0]``; prints the rows (iterations,
 relaxations, beam displacement, base shear) and the trace of the increment that stopped the run.
 """
 import sys
@@ -40,6 +43,7 @@ def corner_blocks(sim, wall):
 def main(argv):
     args = dict(a.split("=", 1) for a in argv)
     n, to = int(args.get("n", 30)), float(args.get("to", 3e-3))
+    rate = float(args.get("rate", 0.0))
     sim, stages, rig = S.build(dict(S.PARAMS, h5=None, progress=False))
     (bl, tr), axis = corner_blocks(sim, rig.wall)
     a = sim.node_set("bottom_left", sim.model.block_nodes([bl]))
@@ -58,7 +62,8 @@ def main(argv):
     relaxing.relax_increment = traced
     push = Stage("push", n, [
         Opening(pattern=PointLoad(target=rig.beam, dof="x", value=KN, name="shear"), a=a, b=b,
-                direction=e, dof="x", path=d0 + to * np.arange(1, n + 1) / n, name="diagonal"),
+                direction=e, dof="x", path=d0 + to * np.arange(1, n + 1) / n, name="diagonal",
+                rate=rate),
         Force(target=rig.beam, dof="x", to=0.0, name="beam_x_free")], frames=n)
     t = time.perf_counter()
     stopped = None
@@ -73,7 +78,7 @@ def main(argv):
     for inc, *_ in trace:
         steps[inc] = steps.get(inc, 0) + 1
     print(f"S5 coarse, diagonal {np.degrees(np.arctan2(e[2], e[0])):.1f} deg, {n} increments "
-          f"of {to / n * 1e3:.3f} mm; {wall_s:.0f} s")
+          f"of {to / n * 1e3:.3f} mm, rate {rate:g}; {wall_s:.0f} s")
     print("| row | iterations | relaxations | beam ux (mm) | base shear (kN) |")
     print("|---|---|---|---|---|")
     for inc, it, ux, fx in zip(h["increment"][rows], h["iterations"][rows],

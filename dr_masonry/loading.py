@@ -237,6 +237,12 @@ class Indirect(_Control):
     dof: str = "x"
 
 
+#: largest ``Opening.rate``: the factor has to move slower than the structure it loads relaxes
+#: (measured: 1e-3 traces the snap-back bar and pushes the S5 wall; 0.1 x the Rayleigh-quotient
+#: frequency ran away on the wall)
+MAX_OPENING_RATE = 0.01
+
+
 @dataclass(eq=False)
 class Opening(_Control):
     """Opening control (crack-opening control, de Borst 1987): the factor of ``pattern`` found so
@@ -247,12 +253,17 @@ class Opening(_Control):
     turns back (a snap-back) is traced: docs/internals.md, "Decisions". ``direction``: a vector
     (3,) along which the opening is measured instead (normalised; e.g. a wall's diagonal, as a
     diagonal transducer measures it); ``dof`` then names the axis of the pattern whose
-    out-of-balance the row checks."""
+    out-of-balance the row checks. ``rate`` (0 <= rate <= MAX_OPENING_RATE; 0: the secant): the
+    factor relaxes with the motion instead, every iteration by ``rate`` x the constraint's
+    reaction over the pattern's total force, one relaxation per increment; where friction makes
+    the reaction at a fixed factor scatter (walls), the secant cannot converge and this can
+    (BENCHMARKS.md, "Path-following controls")."""
     pattern: object = None
     a: object = None
     b: object = None
     dof: str = "x"
     direction: object = None
+    rate: float = 0.0
 
     def __post_init__(self):
         super().__post_init__()
@@ -265,6 +276,9 @@ class Opening(_Control):
             if not isinstance(getattr(self, side), NodeSet):
                 raise LoadingError(f"control {self.label}: {side} must be a NodeSet "
                                    f"(Simulation.node_set), got {getattr(self, side)!r}")
+        if not (is_number(self.rate) and 0.0 <= self.rate <= MAX_OPENING_RATE):
+            raise LoadingError(f"control {self.label}: rate={self.rate!r} must be a number in "
+                               f"[0, {MAX_OPENING_RATE}] (0: the secant on the factor)")
         if np.intersect1d(self.a.nodes, self.b.nodes).size:
             raise LoadingError(f"control {self.label}: node sets {self.a.name!r} and "
                                f"{self.b.name!r} share nodes")

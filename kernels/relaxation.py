@@ -75,9 +75,10 @@ Criteria = namedtuple("Criteria", "tol ref_floor block_tol gap_tol check_every s
 #: n_over, the unstable-iteration count; goal, since: the ratio that counts as progress and the
 #: iterations since it was last reached; best: the best ratio; win_r, win_n, win_d, win_k: the
 #: rate window's best ratio at its start, its iterations, the last window's decrease of
-#: log(best), the windows completed. A call that continues a span is bit for bit the same
-#: relaxation as one uninterrupted call.
-Progress = namedtuple("Progress", "seg n_over goal since best win_r win_n win_d win_k")
+#: log(best), the windows completed; mu: the held :data:`Constraint`'s reaction N at the last
+#: iteration (what a constraint with a ``gain`` moves the load factor by). A call that continues a
+#: span is bit for bit the same relaxation as one uninterrupted call.
+Progress = namedtuple("Progress", "seg n_over goal since best win_r win_n win_d win_k mu")
 #: how a call ended: status ``ST_*``; iterations of the call; residual ratio ||r|| / reference
 #: and the ratio that counts against tol (the largest of it, the blocks' ratio scaled by tol /
 #: block_tol and, with gap_tol, the resultant's scaled by tol / gap_tol), both of the last check;
@@ -92,19 +93,21 @@ Exit = namedtuple("Exit", "status iterations residual ratio kinetic damped store
 #: at the start of a call the displacements and velocities are projected onto it in the metric
 #: of the masses, and every iteration the residual gets the constraint's force coef * reaction
 #: that leaves it no acceleration along the constraint (so the motion keeps it); ``Exit.reaction``
-#: (N) is that force's magnitude at the last check. An opening control (``loading.Opening``) holds a joint's opening
-#: this way. No entries: no constraint.
-Constraint = namedtuple("Constraint", "node dof coef target")
+#: (N) is that force's magnitude at the last check. An opening control (``loading.Opening``) holds
+#: a joint's opening this way. ``gain`` (per N and iteration, 0: none): the load factor relaxes
+#: with the motion, lam -= gain x reaction every iteration, and a check converges only with the
+#: reaction within tol x the reference force. No entries: no constraint.
+Constraint = namedtuple("Constraint", "node dof coef target gain")
 
 
 def no_constraint():
     """The :data:`Constraint` of an increment that holds nothing."""
-    return Constraint(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), 0.0)
+    return Constraint(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), 0.0, 0.0)
 
 
 def start_progress():
     """The :data:`Progress` of an increment's first call."""
-    return Progress(0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    return Progress(0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 
 
 @ijit
@@ -178,7 +181,7 @@ def check(cont, dyn, lam, rpres, crit, pr, its, it, last, fc):
                 win_d = d
                 win_k += 1.0
     return status, ratio, rn, ref, rg, Progress(pr.seg, pr.n_over, goal, since, best, win_r,
-                                                win_n, win_d, win_k)
+                                                win_n, win_d, win_k, pr.mu)
 
 
 @ijit
@@ -406,11 +409,13 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, alpha, ring, crit, pr, con):
         dyn.ring[:] = 0.0
     hbuf = mesh.fbuf.reshape((-1, 3))
     parts = np.zeros(((n + NODE_CHUNK - 1) // NODE_CHUNK, 4))   # per-task sums of the node passes
-    mu = 0.0
+    mu = pr.mu
     place_rigid_nodes(dyn)
     hold(dyn, con)
     for it in range(1, crit.max_iter + 1):
         its = seg + it   # iteration of the span
+        if con.gain != 0.0 and its > 1:   # the factor relaxes with the held constraint
+            lam -= con.gain * mu
         # forces, then one pass over the nodes: gathered forces, residual, the Rayleigh sums
         element_and_contact_forces(dyn.X, dyn.U, mesh, cont)
         num, den = gather_residual(hbuf, mesh.ptr, mesh.rows, cont, dyn, lam, fprev, True, parts)
@@ -427,6 +432,10 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, alpha, ring, crit, pr, con):
             status, ratio, rn, ref, rg, pr = check(cont, dyn, lam, rpres, crit, pr, its, it, last,
                                                    fc)
             last = its
+            if (status == ST_CONVERGED and con.gain != 0.0
+                    and abs(mu) > crit.tol * max(ref, crit.ref_floor)):
+                status = ST_MAXITER   # balanced only with the constraint's help: not yet
+
             if status == ST_NONFINITE:
                 qty, kind, worst = worst_place(dyn, lam)
             elif status == ST_STALLED or status == ST_SLOW:
@@ -465,4 +474,4 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, alpha, ring, crit, pr, con):
     out = finish(mesh, cont, dyn, lam, crit, status, it, rn, ref, rg, ke, damped, worst, kind,
                  qty, mu)
     return out, Progress(seg + it, n_over, pr.goal, pr.since, pr.best, pr.win_r, pr.win_n,
-                         pr.win_d, pr.win_k)
+                         pr.win_d, pr.win_k, mu)

@@ -547,7 +547,7 @@ def test_constraint_force_and_hold_against_numpy():
     d.U[:] = rng.normal(size=(6, 3))
     d.V[:] = rng.normal(size=(6, 3))
     con = R.Constraint(np.array([1, 4, 5]), np.array([0, 0, 2]), np.array([-0.5, 0.25, 0.25]),
-                       0.3)
+                       0.3, 0.0)
     c = np.zeros((6, 3))
     c[con.node, con.dof] = con.coef
     mi = d.minv[:, None]

@@ -139,9 +139,10 @@ def opening_axes(ctl):
     return [(k, float(w)) for k, w in enumerate(ctl.direction) if w != 0.0]
 
 
-def constraint(sim, ctl, target):
+def constraint(sim, ctl, target, gain=0.0):
     """The ``R.Constraint`` holding Opening ``ctl`` at ``target`` m: the mean displacement of
-    ``ctl.b`` minus that of ``ctl.a`` along its DOF (or its direction)."""
+    ``ctl.b`` minus that of ``ctl.a`` along its DOF (or its direction); ``gain``: the load factor's
+    change per N of the constraint's reaction and iteration (0: the factor is held)."""
     from ..kernels.relaxation import Constraint
     a, b = ctl.a.nodes, ctl.b.nodes
     node, dof, coef = [], [], []
@@ -150,7 +151,7 @@ def constraint(sim, ctl, target):
         dof.append(np.full(a.size + b.size, k, np.int64))
         coef += [np.full(a.size, -w / a.size), np.full(b.size, w / b.size)]
     return Constraint(np.concatenate(node).astype(np.int64), np.concatenate(dof),
-                      np.concatenate(coef), float(target))
+                      np.concatenate(coef), float(target), float(gain))
 
 
 def own(sim, target, what):

@@ -9,7 +9,7 @@ import numpy as np
 
 from . import certificate as cert
 from . import controls as C
-from .relaxing import relax_increment, relax_opening
+from .relaxing import opening_gain, relax_increment, relax_opening
 from .rows import commit
 
 #: the predictor does not continue the motion of a block that an accepted increment leaves out of
@@ -70,7 +70,8 @@ def increment(sim, stage, targets, goal, indirect, depth, parent_diss=None):
     t0 = time.perf_counter()
     if isinstance(indirect, C.L.Opening):
         key = C.key(indirect)
-        out = relax_opening(sim, C.constraint(sim, indirect, goal[key]), tol, max_iter, stall)
+        out = relax_opening(sim, C.constraint(sim, indirect, goal[key], opening_gain(sim, indirect)),
+                            tol, max_iter, stall)
     else:
         out = relax_increment(sim, ctrl, pc, tol, max_iter, stall)
     elapsed = time.perf_counter() - t0

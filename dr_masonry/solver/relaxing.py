@@ -134,11 +134,21 @@ SECANT_STEPS = 12
 POLISH = 4.0
 
 
+def opening_gain(sim, ctl):
+    """``R.Constraint.gain`` of Opening ``ctl``: its ``rate`` over the (negative) reaction per
+    unit factor, estimated by the total force of the pattern (``dyn.P``, ``rpP``) N; 0 for the
+    secant (rate 0)."""
+    if ctl.rate == 0.0:
+        return 0.0
+    return -ctl.rate / (np.abs(sim.dyn.P).sum() + np.abs(sim.dyn.rpP).sum())
+
+
 def relax_opening(sim, con, tol, max_iter, stall):
     """Relax an increment of an opening control: hold the constraint ``con`` (``R.Constraint``)
     and find the factor ``sim.lam`` of the control's pattern at which the constraint carries no
-    force, by a secant iteration on its reaction, each step one relaxation from the last one's
-    state (docs/internals.md, "Decisions"). Returns the last relaxation's ``R.Exit`` with the
+    force. With ``con.gain`` the factor relaxes with the motion in one relaxation
+    (``Opening.rate``); else by a secant iteration on its reaction, each step one relaxation
+    from the last one's state (docs/internals.md, "Decisions"). Returns the last relaxation's ``R.Exit`` with the
     increment's iterations and damped energy; a secant that does not bring the reaction within
     ``tol`` x the reference force in ``SECANT_STEPS`` steps ends as ``ST_STALLED``.
 
@@ -150,6 +160,8 @@ def relax_opening(sim, con, tol, max_iter, stall):
     ``POLISH`` x its tolerance the relaxations run to ``tol / POLISH``: the reaction of a
     relaxation stopped at ``tol`` is uncertain by about its tolerance."""
     ctrl = np.zeros(3, dtype=np.int64)
+    if con.gain != 0.0:
+        return relax_increment(sim, ctrl, 1.0, tol, max_iter, stall, con)
     done, damped = 0, 0.0
     lam_a, mu_a, wide = None, None, 0.0
     inner = tol
