@@ -74,24 +74,21 @@ def one(params):
     for key, value in change.items():
         group, attr, _ = OPTIONS[key]
         setattr(getattr(sim.options, group), attr, value)
+    from dr_masonry.results.reader import above_tol
     hist = sim.run(stages)
-    drive = np.column_stack([hist[f"drive.f{a}"] for a in "xyz"])
-    driven = np.isfinite(drive).any(axis=1)
-    axis = int(np.argmax(np.where(np.isfinite(drive[driven]), np.abs(drive[driven]), -1.0)
-                         .max(axis=0)))
+    driven, axis = common.driven(hist)
     tol = sim.options.convergence.tol
     print(json.dumps(dict(x=hist[params["x"]][driven].tolist(),
                           force=hist[f"drive.f{'xyz'[axis]}"][driven].tolist(),
                           iterations=float(np.sum(hist["iterations"]) +
                                            np.nansum(hist["cut_iterations"])),
-                          converged=bool(np.all(hist["residual"] <= tol * (1 + 1e-9))),
-                          tol=tol)))
+                          converged=not above_tol(hist["residual"], tol).any(), tol=tol)))
 
 
 def compare(name, got, ref):
-    """The table row of variant ``name`` (``got``) against the default (``ref``): differences of
-    the force at the default's rows, interpolated in the variant's curve (a cut increment adds
-    rows), in % of the default's peak."""
+    """The table row of run ``name`` (``got``) against the reference run (``ref``): differences of
+    the force at the reference's rows, interpolated in the run's curve (a cut increment adds
+    rows), in % of the reference's peak."""
     x, f = np.array(got["x"]), np.abs(np.array(got["force"]))
     rx, rf = np.array(ref["x"]), np.abs(np.array(ref["force"]))
     peak = int(np.argmax(rf))

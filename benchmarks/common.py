@@ -72,6 +72,20 @@ def child_row(script, overrides, env=None):
     return json.loads(res.stdout.strip().splitlines()[-1])
 
 
+def driven(history):
+    """(mask of the driven rows, driven axis 0-2) of a run's ``history``: the rows with a finite
+    driving force ``drive.f*`` (not a gravity or pre-compression stage) and the axis of the
+    largest |driving force| over them; (empty mask, -1) when no row is driven."""
+    n = len(history["iterations"])
+    drive = np.column_stack([np.asarray(history.get(f"drive.f{a}", np.full(n, np.nan)))
+                             for a in "xyz"])
+    rows = np.isfinite(drive).any(axis=1)
+    if not rows.any():
+        return rows, -1
+    return rows, int(np.argmax(np.where(np.isfinite(drive[rows]), np.abs(drive[rows]), -1.0)
+                               .max(axis=0)))
+
+
 def built_scene(scene, args, name):
     """(simulation, stages) of scene ``scene`` built (not run) with its parameters ``args``
     (space-separated ``key=value`` overrides of the case's ``PARAMS``), writing its results to

@@ -30,20 +30,16 @@ def summary(path):
     from dr_masonry.results.reader import above_tol
     r = open_result(path)
     h, cfg = r.history, r.config
-    drive = np.column_stack([h.get(f"drive.f{a}", np.full(r.n_history, np.nan)) for a in "xyz"])
-    driven = np.isfinite(drive).any(axis=1)
-    if not driven.any():
+    driven, axis = common.driven(h)
+    if axis < 0:
         raise ParameterError(f"{path}: no row of its history is driven (no finite drive.f*)")
-    axis = int(np.argmax(np.where(np.isfinite(drive[driven]), np.abs(drive[driven]), -1.0)
-                         .max(axis=0)))
-    f = np.abs(drive[driven, axis])
+    f = np.abs(h[f"drive.f{'xyz'[axis]}"][driven])
     peak = int(np.argmax(f))
     it = h["iterations"][driven]
     pre, post = it[:peak + 1], it[peak + 1:]
-    tol = cfg["solver"]["tol"]
-    floor = above_tol(h["residual"][driven], tol)
-    gap = np.abs(h[f"gap.f{'xyz'[axis]}"][driven])
     solver = cfg["solver"]
+    floor = above_tol(h["residual"][driven], solver["tol"])
+    gap = np.abs(h[f"gap.f{'xyz'[axis]}"][driven])
     given = {k: cfg[k] if cfg.get(k) is not None else solver.get(k) for k in SETTINGS}
     settings = " ".join(f"{k}={v}" for k, v in given.items() if v not in ("", None))
     med_pre = float(np.median(pre))

@@ -15,9 +15,9 @@ rocking loops at small drifts and toe crushing at large ones.
 
 Run: ``python cases/slender_wall.py [key=value ...]`` (or ``dr-masonry run slender_wall``); the
 monotonic run on the default fine mesh (4 x 1 x 2 hexahedra per brick) took 10 min 54 s on one
-thread beside two other runs (2026-12-07, version 0.2.0), ``mesh=coarse`` about 10 minutes. ``fast=true`` runs a
-0.88 x 0.81 m coarse wall in a few increments (test suite). The full protocols' commands and
-measured run times: README, "Full protocols".
+thread beside two other runs (2026-12-07, version 0.2.0), ``mesh=coarse`` about 10 minutes.
+``fast=true`` runs a 0.88 x 0.81 m coarse wall in a few increments (test suite). The full
+protocols' commands and measured run times: README, "Full protocols".
 """
 import sys
 

@@ -435,7 +435,6 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, alpha, ring, crit, pr, con):
             if (status == ST_CONVERGED and con.gain != 0.0
                     and abs(mu) > crit.tol * max(ref, crit.ref_floor)):
                 status = ST_MAXITER   # balanced only with the constraint's help: not yet
-
             if status == ST_NONFINITE:
                 qty, kind, worst = worst_place(dyn, lam)
             elif status == ST_STALLED or status == ST_SLOW:

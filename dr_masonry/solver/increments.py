@@ -70,8 +70,8 @@ def increment(sim, stage, targets, goal, indirect, depth, parent_diss=None):
     t0 = time.perf_counter()
     if isinstance(indirect, C.L.Opening):
         key = C.key(indirect)
-        out = relax_opening(sim, C.constraint(sim, indirect, goal[key], opening_gain(sim, indirect)),
-                            tol, max_iter, stall)
+        con = C.constraint(sim, indirect, goal[key], opening_gain(sim, indirect))
+        out = relax_opening(sim, con, tol, max_iter, stall)
     else:
         out = relax_increment(sim, ctrl, pc, tol, max_iter, stall)
     elapsed = time.perf_counter() - t0

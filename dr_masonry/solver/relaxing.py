@@ -134,13 +134,16 @@ SECANT_STEPS = 12
 POLISH = 4.0
 
 
+def pattern_slope(sim):
+    """The opening constraint's reaction per unit factor (N) estimated without a relaxation:
+    minus the total force of the increment's pattern (``dyn.P``, ``rpP``)."""
+    return -(np.abs(sim.dyn.P).sum() + np.abs(sim.dyn.rpP).sum())
+
+
 def opening_gain(sim, ctl):
-    """``R.Constraint.gain`` of Opening ``ctl``: its ``rate`` over the (negative) reaction per
-    unit factor, estimated by the total force of the pattern (``dyn.P``, ``rpP``) N; 0 for the
-    secant (rate 0)."""
-    if ctl.rate == 0.0:
-        return 0.0
-    return -ctl.rate / (np.abs(sim.dyn.P).sum() + np.abs(sim.dyn.rpP).sum())
+    """``R.Constraint.gain`` of Opening ``ctl``: its ``rate`` over :func:`pattern_slope`; 0 for
+    the secant (rate 0)."""
+    return ctl.rate / pattern_slope(sim) if ctl.rate else 0.0
 
 
 def relax_opening(sim, con, tol, max_iter, stall):
@@ -148,15 +151,15 @@ def relax_opening(sim, con, tol, max_iter, stall):
     and find the factor ``sim.lam`` of the control's pattern at which the constraint carries no
     force. With ``con.gain`` the factor relaxes with the motion in one relaxation
     (``Opening.rate``); else by a secant iteration on its reaction, each step one relaxation
-    from the last one's state (docs/internals.md, "Decisions"). Returns the last relaxation's ``R.Exit`` with the
-    increment's iterations and damped energy; a secant that does not bring the reaction within
+    from the last one's state (docs/internals.md, "Decisions"). Returns the last relaxation's
+    ``R.Exit`` with the increment's iterations and damped energy; a secant that does not bring the reaction within
     ``tol`` x the reference force in ``SECANT_STEPS`` steps ends as ``ST_STALLED``.
 
     The first trial is the factor the increment starts with (the predictor's: the last
     increment's change continued, ``increments._set_up``); the second steps it by the slope kept from
     the previous increment (``sim.opening_slope``, reaction N per unit factor: that of its
     widest secant pair, the least disturbed by the relaxations' own residual) or, at the first
-    increment, by the reaction over the pattern's total force. Once the reaction is within
+    increment, by :func:`pattern_slope`. Once the reaction is within
     ``POLISH`` x its tolerance the relaxations run to ``tol / POLISH``: the reaction of a
     relaxation stopped at ``tol`` is uncertain by about its tolerance."""
     ctrl = np.zeros(3, dtype=np.int64)
@@ -184,7 +187,7 @@ def relax_opening(sim, con, tol, max_iter, stall):
         if lam_a is None or mu_b == mu_a:
             slope = sim.opening_slope
             if slope is None or slope == 0.0:
-                slope = -(np.abs(sim.dyn.P).sum() + np.abs(sim.dyn.rpP).sum())
+                slope = pattern_slope(sim)
         else:
             slope = (mu_b - mu_a) / (lam_b - lam_a)
             if abs(lam_b - lam_a) >= wide:
