@@ -269,4 +269,5 @@ def relax_scheme(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, scheme, alpha, crit, p
     out = finish(mesh, cont, dyn, lam, crit, status, it, rn, ref, rg, ke, damped, worst, kind,
                  qty, 0.0)
     return (out, Progress(seg + it, pr.n_over, pr.goal, pr.since, pr.best, pr.win_r, pr.win_n,
-                          pr.win_d, pr.win_k, pr.mu), SchemeState(ke_prev, dt, a_mix, n_pos))
+                          pr.win_d, pr.win_k, pr.mu, pr.gmul, pr.msign, pr.msince),
+            SchemeState(ke_prev, dt, a_mix, n_pos))

@@ -76,9 +76,13 @@ Criteria = namedtuple("Criteria", "tol ref_floor block_tol gap_tol check_every s
 #: iterations since it was last reached; best: the best ratio; win_r, win_n, win_d, win_k: the
 #: rate window's best ratio at its start, its iterations, the last window's decrease of
 #: log(best), the windows completed; mu: the held :data:`Constraint`'s reaction N at the last
-#: iteration (what a constraint with a ``gain`` moves the load factor by). A call that continues a
-#: span is bit for bit the same relaxation as one uninterrupted call.
-Progress = namedtuple("Progress", "seg n_over goal since best win_r win_n win_d win_k mu")
+#: iteration (what a constraint with a ``gain`` moves the load factor by); gmul, msign, msince:
+#: the multiple (0, 1] of the constraint's gain in use, the sign of its reaction at the last check
+#: that found it above tolerance (0: none yet) and the iterations since that sign last reversed
+#: (:func:`adapt_gain`). A call that continues a span is bit for bit the same relaxation as one
+#: uninterrupted call.
+Progress = namedtuple("Progress", "seg n_over goal since best win_r win_n win_d win_k mu gmul "
+                                  "msign msince")
 #: how a call ended: status ``ST_*``; iterations of the call; residual ratio ||r|| / reference
 #: and the ratio that counts against tol (the largest of it, the blocks' ratio scaled by tol /
 #: block_tol and, with gap_tol, the resultant's scaled by tol / gap_tol), both of the last check;
@@ -95,19 +99,47 @@ Exit = namedtuple("Exit", "status iterations residual ratio kinetic damped store
 #: that leaves it no acceleration along the constraint (so the motion keeps it); ``Exit.reaction``
 #: (N) is that force's magnitude at the last check. An opening control (``loading.Opening``) holds
 #: a joint's opening this way. ``gain`` (per N and iteration, 0: none): the load factor relaxes
-#: with the motion, lam -= gain x reaction every iteration, and a check converges only with the
-#: reaction within tol x the reference force. No entries: no constraint.
-Constraint = namedtuple("Constraint", "node dof coef target gain")
+#: with the motion, lam -= gmul x gain x reaction every iteration (``Progress.gmul``, cut when
+#: the factor overshoots: :func:`adapt_gain`; ``settle``: the iterations the factor needs to move
+#: by its whole correction at the full gain, 1 / ``Opening.rate``), and a check converges only
+#: with the reaction within tol x the reference force. No entries: no constraint.
+Constraint = namedtuple("Constraint", "node dof coef target gain settle")
 
 
 def no_constraint():
     """The :data:`Constraint` of an increment that holds nothing."""
-    return Constraint(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), 0.0, 0.0)
+    return Constraint(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), 0.0, 0.0, 0.0)
 
 
-def start_progress():
-    """The :data:`Progress` of an increment's first call."""
-    return Progress(0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+#: what an overshoot of a held constraint's reaction multiplies the factor's gain by
+GAIN_CUT = 0.5
+
+
+def start_progress(gmul=1.0):
+    """The :data:`Progress` of an increment's first call; ``gmul``: the multiple of a held
+    constraint's gain to start with."""
+    return Progress(0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, float(gmul), 0.0, 0.0)
+
+
+@ijit
+def adapt_gain(mu, tol_n, gmul, msign, msince, settle, step):
+    """The gain multiple of a held constraint after a check ``step`` iterations after the last
+    one that found its reaction ``mu`` N; returns (gmul, msign, msince) (:data:`Progress`).
+
+    A reaction within ``tol_n`` N changes nothing. Above it, a sign opposite to ``msign`` is a
+    reversal: when the sign held for at least ``settle / gmul`` iterations, the time the factor
+    takes to move by its whole correction, the factor has overshot its equilibrium (a structure
+    that relaxes more slowly than the factor moves makes the pair cycle round it, BENCHMARKS.md
+    "Path-following controls") and ``gmul`` is multiplied by ``GAIN_CUT``; faster reversals are
+    the structure's vibration, which the factor does not follow."""
+    msince += step
+    if abs(mu) <= tol_n:
+        return gmul, msign, msince
+    if msign * mu < 0.0:
+        if msince >= settle / gmul:
+            gmul *= GAIN_CUT
+        msince = 0.0
+    return gmul, 1.0 if mu > 0.0 else -1.0, msince
 
 
 @ijit
@@ -181,7 +213,8 @@ def check(cont, dyn, lam, rpres, crit, pr, its, it, last, fc):
                 win_d = d
                 win_k += 1.0
     return status, ratio, rn, ref, rg, Progress(pr.seg, pr.n_over, goal, since, best, win_r,
-                                                win_n, win_d, win_k, pr.mu)
+                                                win_n, win_d, win_k, pr.mu, pr.gmul, pr.msign,
+                                                pr.msince)
 
 
 @ijit
@@ -410,12 +443,13 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, alpha, ring, crit, pr, con):
     hbuf = mesh.fbuf.reshape((-1, 3))
     parts = np.zeros(((n + NODE_CHUNK - 1) // NODE_CHUNK, 4))   # per-task sums of the node passes
     mu = pr.mu
+    gmul, msign, msince = pr.gmul, pr.msign, pr.msince
     place_rigid_nodes(dyn)
     hold(dyn, con)
     for it in range(1, crit.max_iter + 1):
         its = seg + it   # iteration of the span
         if con.gain != 0.0 and its > 1:   # the factor relaxes with the held constraint
-            lam -= con.gain * mu
+            lam -= gmul * con.gain * mu
         # forces, then one pass over the nodes: gathered forces, residual, the Rayleigh sums
         element_and_contact_forces(dyn.X, dyn.U, mesh, cont)
         num, den = gather_residual(hbuf, mesh.ptr, mesh.rows, cont, dyn, lam, fprev, True, parts)
@@ -431,10 +465,13 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, alpha, ring, crit, pr, con):
                 rp_residual(dyn, lam, rpres)
             status, ratio, rn, ref, rg, pr = check(cont, dyn, lam, rpres, crit, pr, its, it, last,
                                                    fc)
+            if con.gain != 0.0:
+                tol_n = crit.tol * max(ref, crit.ref_floor)
+                if status == ST_CONVERGED and abs(mu) > tol_n:
+                    status = ST_MAXITER   # balanced only with the constraint's help: not yet
+                gmul, msign, msince = adapt_gain(mu, tol_n, gmul, msign, msince, con.settle,
+                                                 its - last)
             last = its
-            if (status == ST_CONVERGED and con.gain != 0.0
-                    and abs(mu) > crit.tol * max(ref, crit.ref_floor)):
-                status = ST_MAXITER   # balanced only with the constraint's help: not yet
             if status == ST_NONFINITE:
                 qty, kind, worst = worst_place(dyn, lam)
             elif status == ST_STALLED or status == ST_SLOW:
@@ -473,4 +510,4 @@ def relax(mesh, cont, dyn, lam_arr, ctrl, ctrl_pc, alpha, ring, crit, pr, con):
     out = finish(mesh, cont, dyn, lam, crit, status, it, rn, ref, rg, ke, damped, worst, kind,
                  qty, mu)
     return out, Progress(seg + it, n_over, pr.goal, pr.since, pr.best, pr.win_r, pr.win_n,
-                         pr.win_d, pr.win_k, mu)
+                         pr.win_d, pr.win_k, mu, gmul, msign, msince)

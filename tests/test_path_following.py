@@ -50,7 +50,7 @@ def specimen():
     return sim, end, faces
 
 
-@pytest.mark.parametrize("rate", [0.0, 1e-3])
+@pytest.mark.parametrize("rate", [0.0, 1e-3, 1e-2])
 def test_opening_control_traces_the_snap_back(rate):
     """40 increments of the opening up to 0.9 u_k, the factor by the secant (rate 0) or relaxed
     with the motion (rate 1e-3): every row is converged, the end displacement turns back after

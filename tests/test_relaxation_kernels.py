@@ -547,7 +547,7 @@ def test_constraint_force_and_hold_against_numpy():
     d.U[:] = rng.normal(size=(6, 3))
     d.V[:] = rng.normal(size=(6, 3))
     con = R.Constraint(np.array([1, 4, 5]), np.array([0, 0, 2]), np.array([-0.5, 0.25, 0.25]),
-                       0.3, 0.0)
+                       0.3, 0.0, 0.0)
     c = np.zeros((6, 3))
     c[con.node, con.dof] = con.coef
     mi = d.minv[:, None]
@@ -566,3 +566,18 @@ def test_constraint_force_and_hold_against_numpy():
     R.hold(d, R.no_constraint())
     np.testing.assert_array_equal(d.U, before[0])
     np.testing.assert_array_equal(d.res, before[1])
+
+
+def test_adapt_gain_cuts_on_slow_reversals_only():
+    """``adapt_gain`` by hand, settle 1000 iterations: reactions within tolerance change nothing
+    but the count; the first reaction above it sets the sign; a reversal after 1000 iterations at
+    the full gain (or 2000 at half) halves the gain, one sooner (the structure's vibration) does
+    not, and either restarts the count."""
+    f = R.adapt_gain
+    assert f(3.0, 5.0, 1.0, 0.0, 0.0, 1000.0, 10.0) == (1.0, 0.0, 10.0)
+    assert f(-30.0, 5.0, 1.0, 0.0, 10.0, 1000.0, 10.0) == (1.0, -1.0, 20.0)
+    assert f(30.0, 5.0, 1.0, -1.0, 990.0, 1000.0, 10.0) == (R.GAIN_CUT, 1.0, 0.0)
+    assert f(30.0, 5.0, 1.0, -1.0, 980.0, 1000.0, 10.0) == (1.0, 1.0, 0.0)
+    assert f(30.0, 5.0, 0.5, -1.0, 1500.0, 1000.0, 10.0) == (0.5, 1.0, 0.0)
+    assert f(-30.0, 5.0, 0.5, 1.0, 1990.0, 1000.0, 10.0) == (0.25, -1.0, 0.0)
+    assert f(30.0, 5.0, 0.5, 1.0, 1990.0, 1000.0, 10.0) == (0.5, 1.0, 2000.0)

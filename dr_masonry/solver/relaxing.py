@@ -66,7 +66,10 @@ def _loop(damping, con):
 
 def relax_increment(sim, ctrl, pc, tol, max_iter, stall, con=None):
     """Relax the increment set up on ``sim``'s arrays; returns its ``R.Exit`` with the attempt's
-    iterations and damped energy J. ``con``: an ``R.Constraint`` to hold (None: none).
+    iterations and damped energy J. ``con``: an ``R.Constraint`` to hold (None: none); one with
+    a gain starts from twice the multiple of it that the last attempt ended with
+    (``sim.opening_gmul``, at most 1) and leaves its own there: a factor that overshot the
+    structure's equilibrium at the last increment would again.
 
     With ``sim.use_coarse``, in spans of ``coarse_every`` iterations (doubled after a rejected
     correction and after the tenth of an increment, up to 64 x; none after two rejections in a
@@ -88,7 +91,8 @@ def relax_increment(sim, ctrl, pc, tol, max_iter, stall, con=None):
         sim.coarse.refresh()
     call = max(c.check_every, CALL_ITERATIONS - CALL_ITERATIONS % c.check_every)
     done, damped, every, tries, span_end = 0, 0.0, k.every, 0, 0
-    pr = R.start_progress()
+    moving = con is not None and con.gain != 0.0
+    pr = R.start_progress(min(1.0, 2.0 * sim.opening_gmul) if moving else 1.0)
     with threads_for(d.U.shape[0]):
         while True:
             if done >= span_end:   # a new span, after a coarse correction while they help
@@ -120,6 +124,8 @@ def relax_increment(sim, ctrl, pc, tol, max_iter, stall, con=None):
             done += out.iterations
             damped += out.damped
             total = out._replace(iterations=done, damped=damped)
+            if moving:
+                sim.opening_gmul = pr.gmul
             for monitor in sim.monitors:
                 monitor(sim, total, done)
             if out.status != R.ST_MAXITER or done >= max_iter:

@@ -200,6 +200,7 @@ class Simulation:
         self.du_prev = None
         self.dctl_prev = 0.0
         self.opening_slope = None   # opening control: reaction N per unit factor (secant)
+        self.opening_gmul = 1.0     # opening control with a rate: the multiple of its gain
         self.dlam_prev = 0.0        # opening control: the last increment's change of factor
         self.writer = None
         if self.output is not None:
