@@ -70,7 +70,8 @@ def settings(item):
 def one(params):
     """Run one variant (``mode=one``) and print its rows as a JSON line."""
     name, change = parse(params["variant"])
-    sim, stages = common.built_scene(params["scene"], params["args"], f"branches_{name}")
+    sim, stages = common.built_scene(params["scene"], params["args"],   # (a file per run)
+                                     f"branches_{name}_{zlib.crc32(params['args'].encode()):08x}")
     for key, value in change.items():
         group, attr, _ = OPTIONS[key]
         setattr(getattr(sim.options, group), attr, value)

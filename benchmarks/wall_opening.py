@@ -30,26 +30,13 @@ from dr_masonry.solver import relaxing
 KN = 1e3
 
 
-def corner_blocks(sim, wall):
-    """The wall's bricks nearest its bottom-left and top-right corners (x-z)."""
-    m = sim.model
-    cent = np.array([m.nodes[m.block_nodes([b])].mean(0) for b in range(m.n_blocks)])
-    inside = np.flatnonzero((cent[:, 2] > 0) & (cent[:, 2] < wall.height))
-    pick = [inside[np.argmin(np.hypot(cent[inside, 0] - x, cent[inside, 2] - z))]
-            for x, z in ((0.0, 0.0), (wall.length, wall.height))]
-    return pick, cent[pick[1]] - cent[pick[0]]
-
-
 def main(argv):
     args = dict(a.split("=", 1) for a in argv)
     n, to = int(args.get("n", 30)), float(args.get("to", 3e-3))
     rate = float(args.get("rate", 0.0))
     sim, stages, rig = S.build(dict(S.PARAMS, h5=None, progress=False))
-    (bl, tr), axis = corner_blocks(sim, rig.wall)
-    a = sim.node_set("bottom_left", sim.model.block_nodes([bl]))
-    b = sim.node_set("top_right", sim.model.block_nodes([tr]))
+    a, b, e = S.corner_bricks(sim, rig.wall)
     sim.run([stages[0]])
-    e = axis / np.linalg.norm(axis)
     d0 = float((sim.dyn.U[b.nodes].mean(0) - sim.dyn.U[a.nodes].mean(0)) @ e)
     trace = []
     plain = relaxing.relax_increment

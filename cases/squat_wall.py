@@ -15,6 +15,12 @@ at the centre of the wall's top face:
   (``protocol=monotonic``) or the cyclic protocol 0.025 ... 0.75 % drift, two cycles each
   (``protocol=cyclic``, :data:`dr_masonry.protocols.S5`).
 
+``control=diagonal`` pushes the monotonic run with the wall's diagonal elongation held instead
+of the beam's displacement (a diagonal transducer's control, :func:`diagonal_push`): the beam's
+horizontal force is the unknown, the push ends at the row where the beam reaches the drift
+target, and the drops where the diagonal crack extends, which displacement control jumps, are
+followed row by row (BENCHMARKS.md, "Path-following controls").
+
 Output: base shear (the actuator force ``beam.fx``) against top displacement (``beam.ux``); the
 foundation's reactions are recorded as ``base.fx/fy/fz``; crack and crushing maps of the wall at
 the points of ``maps``. Reference (paper Figs. 15-17): shear
@@ -40,11 +46,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dr_masonry import (Displacement, Force, JointLaw, Load, Model, PlasticDamage, Simulation,
-                        Stage)
+from dr_masonry import (Displacement, Force, JointLaw, Load, Model, Opening, PlasticDamage,
+                        Simulation, Stage, Until)
 from dr_masonry.cli import run_script
 from dr_masonry.geometry import BrickSpec, Wall, add_beam, add_foundation, add_wall, plane_nodes
-from dr_masonry.loading import Gravity, NodeSet, RigidPoint
+from dr_masonry.loading import Gravity, NodeSet, PointLoad, RigidPoint
 from dr_masonry.materials.joint import KC_PEN_FACTOR
 from dr_masonry.params import ParameterError
 from dr_masonry.postprocess import cycle_text, energy_per_cycle
@@ -63,6 +69,14 @@ PARAMS = dict(
     protocol="monotonic",   # monotonic | cyclic
     drift=S5.monotonic,     # monotonic target, % of the height
     increments=60,          # increments of the monotonic push (30: peak 5.7 % low)
+    control="displacement",  # displacement: the beam's x displacement follows the protocol |
+                            # diagonal (monotonic only): the wall's diagonal elongation (the
+                            # top-right minus the bottom-left corner brick, along the line joining
+                            # them: a diagonal transducer) is held, the beam's force is the
+                            # unknown, and the push ends at the drift target; softening that
+                            # snaps under displacement control is traced (loading.Opening)
+    diagonal_step=0.15 * mm,  # control=diagonal: diagonal elongation per increment, m
+    opening_rate=1e-3,      # control=diagonal: loading.Opening rate (how fast the force follows)
     grading=1.5,            # monotonic: i-th target = drift * (i / increments) ** grading
     step=0.25 * mm,         # cyclic: largest displacement per increment, m (0.5 mm put the
                             # peak of the 0.1 % cycles 6 % low)
@@ -205,11 +219,56 @@ def build(params, protocol=S5):
         path = protocol.path(H, step=params["step"],
                              quarter_increments=params["quarter_increments"],
                              n_amplitudes=params["n_amplitudes"] or None)
-    stages = [Stage("precompression", params["pre_increments"], pre, frames=params["pre_increments"]),
-              Stage("push", path.size, [Displacement(target=beam, dof="x", path=path, name="push")]
-                    + ([Displacement(target=beam, dof="z", name="beam_z")] if hold_z else []),
-                    frames=params["frames"], frame_at=turning_points(path))]
+    beam_z = [Displacement(target=beam, dof="z", name="beam_z")] if hold_z else []
+    stages = [Stage("precompression", params["pre_increments"], pre, frames=params["pre_increments"])]
+    if choice(params, "control", ("displacement", "diagonal")) == "diagonal":
+        if kind != "monotonic":
+            raise ParameterError("parameter control='diagonal' drives a monotonic push: give "
+                                 "protocol=monotonic (a cyclic half-cycle would need the other "
+                                 "diagonal)")
+        stages.append(diagonal_push(sim, scene, path[-1], params, beam_z))
+    else:
+        stages.append(Stage("push", path.size,
+                            [Displacement(target=beam, dof="x", path=path, name="push")] + beam_z,
+                            frames=params["frames"], frame_at=turning_points(path)))
     return sim, stages, scene
+
+
+def corner_bricks(sim, wall, sense=1.0):
+    """The node sets of the wall's bricks nearest the ends of the diagonal that a push in the
+    sense of ``sense`` (+: x, -: -x) lengthens, bottom corner first (bottom-left and top-right
+    for +x), and the unit vector (3,) from the first brick's centre to the second's."""
+    m = sim.model
+    cent = np.array([m.nodes[m.block_nodes([b])].mean(0) for b in range(m.n_blocks)])
+    inside = np.flatnonzero((cent[:, 2] > 0) & (cent[:, 2] < wall.height))
+    ends = (((0.0, 0.0), (wall.length, wall.height)) if sense > 0
+            else ((wall.length, 0.0), (0.0, wall.height)))
+    pick = [inside[np.argmin(np.hypot(cent[inside, 0] - x, cent[inside, 2] - z))]
+            for x, z in ends]
+    axis = cent[pick[1]] - cent[pick[0]]
+    names = ("bottom_left", "top_right") if sense > 0 else ("bottom_right", "top_left")
+    return (sim.node_set(names[0], m.block_nodes([pick[0]])),
+            sim.node_set(names[1], m.block_nodes([pick[1]])), axis / np.linalg.norm(axis))
+
+
+def diagonal_push(sim, scene, target, params, extra=()):
+    """The push under opening control (``control=diagonal``): the wall's diagonal elongation
+    (:func:`corner_bricks`) grows by ``diagonal_step`` per increment, the beam's horizontal force
+    (a 1 kN pattern; history ``lambda`` in kN) found with ``Opening(rate=opening_rate)``; the
+    stage ends at the increment where the beam reaches ``target`` m (its elongation's path runs
+    to |target|: past the peak the diagonal opens about as fast as the beam moves)."""
+    step = params["diagonal_step"]
+    if not (np.isfinite(step) and 0.0 < step <= abs(target)):
+        raise ParameterError(f"parameter diagonal_step={step!r}: must be a length in (0, "
+                             f"{abs(target):.4g}] m (the push's target)")
+    a, b, direction = corner_bricks(sim, scene.wall, np.sign(target))
+    n = int(np.ceil(abs(target) / step))
+    shear = PointLoad(target=scene.beam, dof="x", value=np.sign(target) * kN, name="shear")
+    push = Opening(pattern=shear, a=a, b=b, direction=direction, dof="x", name="diagonal",
+                   to=abs(target), rate=params["opening_rate"])
+    return Stage("push", n, [push, Force(target=scene.beam, dof="x", to=0.0, name="beam_x"),
+                             *extra],
+                 frames=params["frames"], until=Until(scene.beam, "x", target))
 
 
 def run(params, protocol=S5):

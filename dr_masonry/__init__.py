@@ -9,7 +9,7 @@ from . import units
 from .model import Model, ModelError
 from .materials import JointLaw, PlasticDamage
 from .loading import (Displacement, Force, Load, Indirect, Opening, Stage, Gravity, BodyForce,
-                      Pressure, PointLoad, Combined, cyclic_path)
+                      Pressure, PointLoad, Combined, Until, cyclic_path)
 from .options import SolverOptions
 from .solver import Simulation, SolverError
 from .drivers_joint import drive_joint
@@ -17,6 +17,6 @@ from .drivers_material import drive_material, drive_strain_path
 
 __version__ = "0.2.0"
 __all__ = ["units", "Model", "ModelError", "JointLaw", "PlasticDamage", "Displacement", "Force",
-           "Load", "Indirect", "Opening", "Stage", "Gravity", "BodyForce", "Pressure", "PointLoad", "Combined",
-           "cyclic_path", "Simulation", "SolverOptions", "SolverError", "drive_joint",
+           "Load", "Indirect", "Opening", "Stage", "Until", "Gravity", "BodyForce", "Pressure",
+           "PointLoad", "Combined", "cyclic_path", "Simulation", "SolverOptions", "SolverError", "drive_joint",
            "drive_material", "drive_strain_path"]

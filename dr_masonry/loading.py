@@ -15,6 +15,12 @@ Controls
 :class:`Indirect`      indirect displacement control: the factor of a load pattern is the unknown
                        chosen so that a control DOF follows its target (softening branches under
                        pressure, equal floor forces, rocking peaks).
+:class:`Opening`       opening control: the factor of a load pattern chosen so that the relative
+                       displacement of two node sets follows its target (a joint's opening, a
+                       wall's diagonal elongation), snap-backs included.
+
+:class:`Until` ends a stage early, at the increment where a displacement reaches a value (an
+opening-controlled push that ends at its target drift).
 """
 from __future__ import annotations
 
@@ -238,8 +244,8 @@ class Indirect(_Control):
 
 
 #: largest ``Opening.rate``: the factor has to move slower than the structure it loads relaxes
-#: (measured: 1e-3 traces the snap-back bar and pushes the S5 wall; 0.1 x the Rayleigh-quotient
-#: frequency ran away on the wall)
+#: (measured: 1e-3 and 1e-2 trace the snap-back bar, 1e-3 pushes the S5 wall; 0.1 x the
+#: Rayleigh-quotient frequency ran away on the wall)
 MAX_OPENING_RATE = 0.01
 
 
@@ -256,8 +262,10 @@ class Opening(_Control):
     out-of-balance the row checks. ``rate`` (0 <= rate <= MAX_OPENING_RATE; 0: the secant): the
     factor relaxes with the motion instead, every iteration by ``rate`` x the constraint's
     reaction over the pattern's total force, one relaxation per increment; where friction makes
-    the reaction at a fixed factor scatter (walls), the secant cannot converge and this can
-    (BENCHMARKS.md, "Path-following controls")."""
+    the reaction at a fixed factor scatter (walls), the secant cannot converge and this can;
+    where the structure relaxes more slowly than the factor moves (near a peak) the factor's
+    rate is halved at every overshoot (``kernels.relaxation.adapt_gain``), so that ``rate`` is
+    the fastest it moves (BENCHMARKS.md, "Path-following controls")."""
     pattern: object = None
     a: object = None
     b: object = None
@@ -283,6 +291,30 @@ class Opening(_Control):
             raise LoadingError(f"control {self.label}: node sets {self.a.name!r} and "
                                f"{self.b.name!r} share nodes")
         dof_index(self.dof, rotations=False)
+
+
+@dataclass(eq=False)
+class Until:
+    """The end of a stage at a displacement: the stage stops after the first increment at which
+    DOF ``dof`` of rigid point ``target`` has reached ``value`` (m, or rad for a rotation) from
+    the side it was on when the stage began (or was resumed). Under an opening control the
+    target drift is reached at an increment the stage's path cannot know."""
+    target: object = None
+    dof: str = "x"
+    value: float = 0.0
+
+    def __post_init__(self):
+        if not isinstance(self.target, RigidPoint):
+            raise LoadingError(f"Until: target must be a RigidPoint (Simulation.rigid_point), got "
+                               f"{self.target!r}")
+        dof_index(self.dof)
+        if not is_number(self.value):
+            raise LoadingError(f"Until {self.target.name}.{self.dof}: value={self.value!r} must be "
+                               f"a finite number (m or rad)")
+
+    def position(self, sim):
+        """The DOF's displacement now (m or rad)."""
+        return float(sim.dyn.rpU[self.target.index, dof_index(self.dof)])
 
 
 #: the most increments one stage or protocol path may have: an increment relaxes in 10^2-10^5
@@ -314,7 +346,7 @@ class Stage:
     ``frames``: write a field frame every this many increments (and at the stage's end);
     ``frame_at``: also after these increments of the stage (counted from 1; e.g. a cyclic path's
     turning points, :func:`dr_masonry.protocols.turning_points`); ``max_iter``/``tol`` override
-    the solver options for this stage.
+    the solver options for this stage; ``until``: an :class:`Until` that ends the stage early.
     """
     name: str
     increments: int
@@ -323,6 +355,7 @@ class Stage:
     max_iter: int = None
     tol: float = None
     frame_at: tuple = ()
+    until: object = None
 
     def __post_init__(self):
         for key, low in (("increments", 1), ("frames", 1), ("max_iter", 1)):
@@ -347,6 +380,11 @@ class Stage:
             raise LoadingError(f"stage {self.name!r}: controls must be a list of Displacement, "
                                f"Force, Load, Indirect and Opening controls, got "
                                f"{self.controls!r}")
+        if self.until is not None:
+            if not isinstance(self.until, Until):
+                raise LoadingError(f"stage {self.name!r}: until must be an Until, got "
+                                   f"{self.until!r}")
+            self.until.__post_init__()
         if sum(isinstance(c, (Indirect, Opening)) for c in self.controls) > 1:
             raise LoadingError(f"stage {self.name!r}: at most one Indirect or Opening control per "
                                f"stage")

@@ -625,3 +625,64 @@ def test_beam_held_vertically_and_elastic_bricks():
     assert elastic["max_dt"][-1] == 0 and elastic["max_dc"][-1] == 0
     assert elastic["beam.fx"][e_push].max() == pytest.approx(free["beam.fx"][free_push].max(),
                                                               rel=0.02)
+
+
+@pytest.fixture(scope="module")
+def squat_diagonal():
+    """The tiny S5 of ``squat`` pushed to 0.03 % drift (0.24 mm) with its diagonal elongation
+    held (``control=diagonal``), 0.02 mm per increment: the range before the tiny wall rocks
+    (rocking about its base turns the diagonal's bricks without lengthening it)."""
+    return squat_wall.run(dict(tiny(squat_wall, control="diagonal", diagonal_step=0.02e-3),
+                               drift=0.03))
+
+
+def test_diagonal_control_follows_the_displacement_controlled_curve(squat, squat_diagonal):
+    """Under opening control on the diagonal the push ends at the first row past the drift
+    target (``Until``), every row converged under the opening control (history ``control`` 2),
+    the base shear is the pattern's factor (kN) and the foundation balances it, and the curve is
+    the displacement-controlled run's: at every row's top displacement the force within 1 % of
+    that run's (both are equilibria of one model)."""
+    sim, hist, push, _ = squat_diagonal
+    _, ref, ref_push, _ = squat
+    u, V = hist["beam.ux"][push], hist["beam.fx"][push]
+    target = 0.03 / 100 * H
+    assert u[-1] >= target > u[-2] and push.sum() >= 5
+    assert np.all(hist["control"][push] == 2) and np.all(hist["control"][~push] == 0)
+    assert np.all(hist["residual"][push] <= sim.options.convergence.tol)
+    np.testing.assert_allclose(V, hist["lambda"][push] * 1e3, rtol=1e-3)
+    np.testing.assert_allclose(-hist["base.fx"][push], V, atol=0.005 * V.max())
+    np.testing.assert_allclose(V, np.interp(u, ref["beam.ux"][ref_push], ref["beam.fx"][ref_push]),
+                               rtol=0.01)
+
+
+def test_diagonal_control_input_errors():
+    with pytest.raises(ParameterError, match="control='diagonal' drives a monotonic push"):
+        squat_wall.build(tiny(squat_wall, control="diagonal", protocol="cyclic"))
+    with pytest.raises(ParameterError, match="diagonal_step=0.0"):
+        squat_wall.build(tiny(squat_wall, control="diagonal", diagonal_step=0.0))
+    with pytest.raises(ParameterError, match="control='force'"):
+        squat_wall.build(tiny(squat_wall, control="force"))
+    with pytest.raises(LoadingError, match="rate=0.5"):
+        squat_wall.build(tiny(squat_wall, control="diagonal", opening_rate=0.5))
+
+
+def test_stage_ended_by_until_resumes_with_the_next(tmp_path, squat_diagonal):
+    """A push its ``Until`` ends is a finished stage: its last frame's checkpoint says so, the
+    file counts as complete, and a stage after it runs from there."""
+    from dr_masonry import Displacement, Stage, Until
+    sim, stages, rig = squat_wall.build(dict(tiny(squat_wall, control="diagonal",
+                                                  diagonal_step=0.02e-3),
+                                             drift=0.01, h5=str(tmp_path / "d.h5")))
+    hold = Stage("hold", 2, [Displacement(target=rig.beam, dof="x")])
+    hist = sim.run(stages + [hold])
+    push = stages[1]
+    rows = hist["increment"] > stages[0].increments
+    assert push.until.value == pytest.approx(0.01 / 100 * H)
+    assert rows.sum() - 2 < push.increments
+    assert np.all(hist["control"][-2:] == 0)
+    sim.close()
+    assert open_result(str(tmp_path / "d.h5")).complete
+    with pytest.raises(LoadingError, match="until must be an Until"):
+        Stage("s", 1, until=0.1)
+    with pytest.raises(LoadingError, match="Until: target must be a RigidPoint"):
+        Until(None, "x", 0.1)

@@ -142,7 +142,8 @@ def opening_axes(ctl):
 def constraint(sim, ctl, target, gain=0.0):
     """The ``R.Constraint`` holding Opening ``ctl`` at ``target`` m: the mean displacement of
     ``ctl.b`` minus that of ``ctl.a`` along its DOF (or its direction); ``gain``: the load factor's
-    change per N of the constraint's reaction and iteration (0: the factor is held)."""
+    change per N of the constraint's reaction and iteration (0: the factor is held), its
+    ``settle`` 1 / ``ctl.rate`` iterations."""
     from ..kernels.relaxation import Constraint
     a, b = ctl.a.nodes, ctl.b.nodes
     node, dof, coef = [], [], []
@@ -151,7 +152,8 @@ def constraint(sim, ctl, target, gain=0.0):
         dof.append(np.full(a.size + b.size, k, np.int64))
         coef += [np.full(a.size, -w / a.size), np.full(b.size, w / b.size)]
     return Constraint(np.concatenate(node).astype(np.int64), np.concatenate(dof),
-                      np.concatenate(coef), float(target), float(gain))
+                      np.concatenate(coef), float(target), float(gain),
+                      1.0 / ctl.rate if ctl.rate else 0.0)
 
 
 def own(sim, target, what):
@@ -168,13 +170,23 @@ def own(sim, target, what):
                              f"node_set, or by hand)")
 
 
+def opening(sim, ctl):
+    """The present opening (m) of Opening ``ctl``: the mean displacement of ``ctl.b`` minus that
+    of ``ctl.a`` along its DOF (or its direction)."""
+    U = sim.dyn.U
+    return float(sum(w * (U[ctl.b.nodes, k].mean() - U[ctl.a.nodes, k].mean())
+                     for k, w in opening_axes(ctl)))
+
+
 def current(sim, ctl):
     """Where a control that no earlier stage set starts: a Displacement of a rigid point's DOF at
     the point's present displacement (so that ``Displacement(target=point, dof=d)`` without
-    ``to`` or ``path`` holds the point where the earlier stages left it), every other control at
-    0."""
+    ``to`` or ``path`` holds the point where the earlier stages left it), an Opening at the
+    present opening (``to`` then ramps it from there), every other control at 0."""
     if isinstance(ctl, L.Displacement) and isinstance(ctl.target, L.RigidPoint):
         return float(sim.dyn.rpU[ctl.target.index, L.dof_index(ctl.dof, True)])
+    if isinstance(ctl, L.Opening):
+        return opening(sim, ctl)
     return 0.0
 
 
@@ -227,6 +239,18 @@ def assemble_loads(sim, indirect):
         P, rpP = pattern_forces(sim, indirect.pattern)
         d.P[:] = P
         d.rpP[:] = rpP
+
+
+#: history column ``control``: what a row's increment ran under
+CONTROL_CODES = {"prescribed": 0, "indirect": 1, "opening": 2}
+
+
+def control_code(indirect):
+    """The ``control`` history code of an increment whose stage's Indirect or Opening control is
+    ``indirect`` (None: prescribed values only)."""
+    if indirect is None:
+        return CONTROL_CODES["prescribed"]
+    return CONTROL_CODES["opening" if isinstance(indirect, L.Opening) else "indirect"]
 
 
 def control_dof(sim, indirect):

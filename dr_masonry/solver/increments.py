@@ -37,6 +37,8 @@ def run_stage(sim, stage, where, first=0, starts=None):
             C.pattern_forces(sim, ctl.pattern)
     start_values = [[list(key), float(starts[key])] for key in targets]
     sim.stage_name = stage.name
+    until = stage.until
+    side = None if until is None else np.sign(until.value - until.position(sim))
     for i in range(first, n):
         # a checkpoint inside increment i (after a committed part of a cut increment) continues
         # it from there ...
@@ -46,12 +48,22 @@ def run_stage(sim, stage, where, first=0, starts=None):
         if not (resumed and i == first and sim._checkpoint_inside
                 and all(sim.values.get(k) == v for k, v in goal.items())):
             increment(sim, stage, targets, goal, indirect, depth=0)
-        sim.stage_position = (where[0], i + 1, start_values, where[1], n)
-        if (i + 1) % stage.frames == 0 or i == n - 1 or i + 1 in stage.frame_at:
+        reached = bool(side) and side * (until.value - until.position(sim)) <= 0.0
+        # (a stage its Until ends is done: a resume goes on with the next)
+        sim.stage_position = (where[0], n if reached else i + 1, start_values, where[1], n)
+        if (i + 1) % stage.frames == 0 or i == n - 1 or i + 1 in stage.frame_at or reached:
             sim.write_frame()
         elif sim.checkpoints.due(sim):
             sim.checkpoints.write(sim)
         sim.progress.increment_done()
+        if reached:
+            break
+    else:
+        if side:
+            warnings.warn(f"stage {stage.name!r} ended at its last increment with "
+                          f"{until.target.name}.u{until.dof} = {until.position(sim):.6g}, short "
+                          f"of its Until value {until.value:.6g}: give the stage's control a "
+                          f"longer path", RuntimeWarning, stacklevel=2)
     if indirect is not None:
         C.release(sim, indirect)
 
@@ -100,7 +112,7 @@ def increment(sim, stage, targets, goal, indirect, depth, parent_diss=None):
     sim.du_prev = predictor_motion(sim, snap[0])
     sim.dctl_prev = dctl
     sim.dlam_prev = float(sim.lam[0] - snap[7][0])
-    commit(sim, out, elapsed, v.energies, v.balance)
+    commit(sim, out, elapsed, v.energies, v.balance, C.control_code(indirect))
     if depth > 0 and sim.checkpoints.due(sim):
         sim.checkpoints.write(sim, inside=True)   # a part of a cut increment (hours, some)
 

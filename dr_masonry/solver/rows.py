@@ -12,9 +12,10 @@ from . import certificate as cert
 from .arrays import mark_pristine
 
 
-def commit(sim, out, elapsed, energies, balance):
+def commit(sim, out, elapsed, energies, balance, control=0):
     """Accept the increment that ended with ``out`` (``R.Exit``; ``energies`` and ``balance``
-    of its :data:`~.certificate.Verdict`): commit the state, make its history row and hand it to
+    of its :data:`~.certificate.Verdict`; ``control``: what it ran under,
+    ``controls.CONTROL_CODES``): commit the state, make its history row and hand it to
     ``sim.observers``."""
     d, mesh, cont = sim.dyn, sim.mesh, sim.cont
     sim.energy.commit(energies, d.U)
@@ -25,8 +26,8 @@ def commit(sim, out, elapsed, energies, balance):
     sim.increment += 1
     balance_error = energy_columns.pop("balance_error")
     row = {"increment": sim.increment, "iterations": out.iterations, "residual": out.residual,
-           "time_s": elapsed, "lambda": float(sim.lam[0]), "cut_iterations": sim._cut_work[0],
-           "cut_s": sim._cut_work[1], "dissipation_ratio": energies.ratio, **energy_columns,
+           "time_s": elapsed, "control": control, "lambda": float(sim.lam[0]),
+           "cut_iterations": sim._cut_work[0], "cut_s": sim._cut_work[1], "dissipation_ratio": energies.ratio, **energy_columns,
            "E_kinetic": out.kinetic, "balance_error": balance_error}
     row.update(state_columns(sim, out, balance))
     row.update(reaction_columns(sim, balance))
