@@ -25,7 +25,7 @@ from dr_masonry import Force, Opening, Stage
 from dr_masonry.cases import squat_wall as S
 from dr_masonry.loading import PointLoad
 from dr_masonry.solver import SolverError
-from dr_masonry.solver import relaxing
+from dr_masonry.solver import controls, relaxing
 
 KN = 1e3
 
@@ -37,7 +37,9 @@ def main(argv):
     sim, stages, rig = S.build(dict(S.PARAMS, h5=None, progress=False))
     a, b, e = S.corner_bricks(sim, rig.wall)
     sim.run([stages[0]])
-    d0 = float((sim.dyn.U[b.nodes].mean(0) - sim.dyn.U[a.nodes].mean(0)) @ e)
+    diagonal = Opening(pattern=PointLoad(target=rig.beam, dof="x", value=KN, name="shear"), a=a,
+                       b=b, direction=e, dof="x", to=0.0, name="diagonal", rate=rate)
+    diagonal.to = controls.opening(sim, diagonal) + to   # ramped from its value now
     trace = []
     plain = relaxing.relax_increment
 
@@ -47,11 +49,8 @@ def main(argv):
         trace.append((sim_.increment + 1, lam, out.reaction, tol * out.ref, out.iterations))
         return out
     relaxing.relax_increment = traced
-    push = Stage("push", n, [
-        Opening(pattern=PointLoad(target=rig.beam, dof="x", value=KN, name="shear"), a=a, b=b,
-                direction=e, dof="x", path=d0 + to * np.arange(1, n + 1) / n, name="diagonal",
-                rate=rate),
-        Force(target=rig.beam, dof="x", to=0.0, name="beam_x_free")], frames=n)
+    push = Stage("push", n, [diagonal, Force(target=rig.beam, dof="x", to=0.0,
+                                             name="beam_x_free")], frames=n)
     t = time.perf_counter()
     stopped = None
     try:

@@ -18,5 +18,5 @@ from .drivers_material import drive_material, drive_strain_path
 __version__ = "0.2.0"
 __all__ = ["units", "Model", "ModelError", "JointLaw", "PlasticDamage", "Displacement", "Force",
            "Load", "Indirect", "Opening", "Stage", "Until", "Gravity", "BodyForce", "Pressure",
-           "PointLoad", "Combined", "cyclic_path", "Simulation", "SolverOptions", "SolverError", "drive_joint",
-           "drive_material", "drive_strain_path"]
+           "PointLoad", "Combined", "cyclic_path", "Simulation", "SolverOptions", "SolverError",
+           "drive_joint", "drive_material", "drive_strain_path"]

@@ -158,8 +158,9 @@ def relax_opening(sim, con, tol, max_iter, stall):
     force. With ``con.gain`` the factor relaxes with the motion in one relaxation
     (``Opening.rate``); else by a secant iteration on its reaction, each step one relaxation
     from the last one's state (docs/internals.md, "Decisions"). Returns the last relaxation's
-    ``R.Exit`` with the increment's iterations and damped energy; a secant that does not bring the reaction within
-    ``tol`` x the reference force in ``SECANT_STEPS`` steps ends as ``ST_STALLED``.
+    ``R.Exit`` with the increment's iterations and damped energy; a secant that does not bring
+    the reaction within ``tol`` x the reference force in ``SECANT_STEPS`` steps ends as
+    ``ST_STALLED``.
 
     The first trial is the factor the increment starts with (the predictor's: the last
     increment's change continued, ``increments._set_up``); the second steps it by the slope kept from

@@ -27,8 +27,9 @@ def commit(sim, out, elapsed, energies, balance, control=0):
     balance_error = energy_columns.pop("balance_error")
     row = {"increment": sim.increment, "iterations": out.iterations, "residual": out.residual,
            "time_s": elapsed, "control": control, "lambda": float(sim.lam[0]),
-           "cut_iterations": sim._cut_work[0], "cut_s": sim._cut_work[1], "dissipation_ratio": energies.ratio, **energy_columns,
-           "E_kinetic": out.kinetic, "balance_error": balance_error}
+           "cut_iterations": sim._cut_work[0], "cut_s": sim._cut_work[1],
+           "dissipation_ratio": energies.ratio, **energy_columns, "E_kinetic": out.kinetic,
+           "balance_error": balance_error}
     row.update(state_columns(sim, out, balance))
     row.update(reaction_columns(sim, balance))
     # finite sliding: re-pair for the next increment (this row's forces are those above)
