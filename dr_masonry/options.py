@@ -46,7 +46,9 @@ class Convergence:
     block_tol : and every block's imbalance ratio (net out-of-balance force over the magnitudes
         of its forces) at most this (0: off)
     gap_tol : and the out-of-balance resultant along each driven axis at most this fraction of
-        the driving force (0: off; also bounds a row accepted at the floor)
+        the driving force, the largest so far (0: off; also bounds a row accepted at the
+        floor). 0.004 keeps every row's drive force and support reaction within 0.4 % of the
+        run's peak; on the S5 wall it changes neither the curve nor the iterations
     floor_tol : an increment stopped short of tol with its ratio at or below this is accepted
         with a warning instead of cut (0: off)
     energy_tol : energy-balance error (of the gross external work) above which a run warns
@@ -54,7 +56,7 @@ class Convergence:
     """
     tol: float = 5e-5
     block_tol: float = 0.1
-    gap_tol: float = 0.0
+    gap_tol: float = 0.004
     floor_tol: float = 0.0
     energy_tol: float = 0.01
     check_every: int = 10
