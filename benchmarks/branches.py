@@ -40,6 +40,7 @@ OPTIONS = dict(alpha=("damping", "alpha", float), ring=("damping", "ring", float
                gap_tol=("convergence", "gap_tol", float),
                block_tol=("convergence", "block_tol", float),
                stall_iter=("increments", "stall_iter", int),
+               adapt=("increments", "adapt", lambda v: {"true": True, "false": False}[v]),
                coarse=("coarse", "enabled", lambda v: {"true": True, "false": False}.get(v, v)))
 
 

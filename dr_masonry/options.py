@@ -73,12 +73,17 @@ class Increments:
     max_dissipation : a converged increment that dissipates more than this fraction of the
         external work so far is cut (0: off)
     predictor : start an increment from the previous one's displacement increment
+    adapt : step memory: after a cut the next increments start split into the parts that
+        converged (up to max_cuts - 1 halvings); ``QUICK_PARTS`` parts in a row that converged
+        in at most ``QUICK`` x stall_iter iterations each take one halving back (off with
+        stall_iter 0) (:mod:`dr_masonry.solver.increments`)
     """
     max_iter: int = 200_000
     max_cuts: int = 4
     stall_iter: int = 10_000
     max_dissipation: float = 0.0
     predictor: bool = True
+    adapt: bool = True
 
 
 @dataclass
@@ -223,6 +228,7 @@ class SolverOptions:
         if d.alpha is None:
             d.alpha = ALPHA_DEFAULT[d.scheme]
         for group, name, flat in ((s, "redetect", "redetect"), (i, "predictor", "predictor"),
+                                  (i, "adapt", "adapt"),
                                   (o, "progress", "progress"),
                                   (d, "allow_unstable", "allow_unstable")):
             if not isinstance(getattr(group, name), (bool, np.bool_)):

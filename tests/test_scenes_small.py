@@ -109,6 +109,7 @@ def test_unconverged_increment_is_cut_and_accounted(monkeypatch):
     law = JointLaw.reference()
     sim, stages = couplet.build(dict(couplet.PARAMS, h5=None))
     sim.options.increments.max_iter = 35       # several couplet increments need 40 iterations
+    sim.options.increments.adapt = False       # the cuts alone (the step memory: below)
     hist = sim.run(stages)
     n = couplet.PARAMS["increments"]
     extra = hist["iterations"].size - n
@@ -144,6 +145,63 @@ def test_unconverged_increment_is_cut_and_accounted(monkeypatch):
     with pytest.raises(SolverError, match=r"increment \d+ of stage 'tension' did not converge in "
                                           r"35 iterations after 0 cuts .*resume=true"):
         sim.run(stages)
+
+
+def test_step_memory_starts_the_next_increments_split():
+    """Step memory (``adapt``, the default): after S1's increment cut at the iteration cap, the
+    next increments start in the halves that converged, without an attempt to book, until
+    ``QUICK_PARTS`` quick parts in a row take the halving back. Every row is a 1 / 2^k part of
+    its increment, the split rows are followed by whole increments again, the path ends at its
+    last value and the peak is that of the run without the memory, for fewer cut attempts."""
+    n = couplet.PARAMS["increments"]
+    path = couplet.PARAMS["u_max"] * (np.arange(n + 1) / n) ** 3
+    hists = {}
+    for adapt in (False, True):
+        sim, stages = couplet.build(dict(couplet.PARAMS, h5=None))
+        sim.options.increments.max_iter = 35       # several increments need 40 iterations
+        sim.options.increments.adapt = adapt
+        hists[adapt] = sim.run(stages)
+    off, on = hists[False], hists[True]
+    u = on["platen.uz"]
+    step = np.diff(np.concatenate([[0.0], u]))
+    whole = np.diff(path)[np.searchsorted(path, u - 1e-15) - 1]
+    k = np.log2(whole / step)
+    assert np.allclose(k, np.round(k), atol=1e-6)
+    split = (np.round(k) > 0) & (on["cut_iterations"] == 0)
+    first_cut = np.flatnonzero(on["cut_iterations"] > 0)[0]
+    assert split[first_cut + 2:].sum() >= increments.QUICK_PARTS - 1   # halves, not attempts
+    assert np.all(np.round(k[-20:]) == 0)                              # whole again
+    assert 0 < on["cut_iterations"].sum() < off["cut_iterations"].sum()
+    assert u[-1] == pytest.approx(couplet.PARAMS["u_max"], rel=1e-12)
+    assert on["platen.fz"].max() == pytest.approx(off["platen.fz"].max(), rel=1e-3)
+
+
+def test_step_memory_rules():
+    """``adapt_split`` on its own: a part reached by a cut sets the split to its depth, at most
+    max_cuts - 1, however slow; ``QUICK_PARTS`` quick parts in a row take one halving back, a
+    middling part resets the count; off with ``adapt`` False or stall_iter 0."""
+    from types import SimpleNamespace
+    sim = SimpleNamespace(options=SolverOptions(max_cuts=4, stall_iter=10_000), split=0,
+                          quick=0)
+    quick = int(increments.QUICK * 10_000)
+    increments.adapt_split(sim, 2, 500)          # a quarter reached by two cuts
+    assert (sim.split, sim.quick) == (2, 0)
+    increments.adapt_split(sim, 2, 20_000)       # slow, at the split: unchanged
+    assert sim.split == 2
+    increments.adapt_split(sim, 4, 100)          # never past max_cuts - 1
+    assert sim.split == 3
+    for j in range(increments.QUICK_PARTS - 1):
+        increments.adapt_split(sim, 3, quick)
+    assert (sim.split, sim.quick) == (3, increments.QUICK_PARTS - 1)
+    increments.adapt_split(sim, 3, quick + 1)    # middling: the count starts again
+    assert (sim.split, sim.quick) == (3, 0)
+    for j in range(increments.QUICK_PARTS):
+        increments.adapt_split(sim, 3, quick)
+    assert (sim.split, sim.quick) == (2, 0)
+    for opts in (SolverOptions(adapt=False), SolverOptions(stall_iter=0)):
+        off = SimpleNamespace(options=opts, split=0, quick=0)
+        increments.adapt_split(off, 2, 50_000)
+        assert off.split == 0
 
 
 def test_floor_tol_accepts_an_increment_short_of_tol():

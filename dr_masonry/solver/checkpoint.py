@@ -45,7 +45,7 @@ class Checkpoints:
         meta = {"values": [[list(k), v] for k, v in sim.values.items()],
                 "factors": sim.factors, **energy_meta, "dctl_prev": sim.dctl_prev,
                 "dlam_prev": sim.dlam_prev, "opening_slope": sim.opening_slope,
-                "opening_gmul": sim.opening_gmul,
+                "opening_gmul": sim.opening_gmul, "split": sim.split, "quick": sim.quick,
                 "history": {k: v for k, v in sim.history.items()}, "patterns": [],
                 "stage": list(sim.stage_position), "inside": inside}
         for name, (pat, P, rpP) in sim.patterns.items():
@@ -104,6 +104,8 @@ def load(sim, increment=None):
     sim.dlam_prev = meta.get("dlam_prev", 0.0)          # older files: no opening predictor
     sim.opening_slope = meta.get("opening_slope")
     sim.opening_gmul = meta.get("opening_gmul", 1.0)    # older files: the full gain
+    sim.split = meta.get("split", 0)                    # older files: no step memory
+    sim.quick = meta.get("quick", 0)
     sim._checkpoint_stage = meta.get("stage")
     sim._checkpoint_inside = meta.get("inside", True)   # older files: may be
     sim.history = {k: list(v) for k, v in meta["history"].items()}

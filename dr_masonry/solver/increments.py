@@ -1,5 +1,6 @@
 """The increment loop: the increments of a stage, each relaxed to rest and committed, or cut in
-two and retried, with the predictor that starts an increment from the previous one's motion."""
+two and retried, with the predictor that starts an increment from the previous one's motion and
+the step memory that starts an increment split into the parts that converged last."""
 from __future__ import annotations
 
 import time
@@ -15,6 +16,10 @@ from .rows import commit
 #: the predictor does not continue the motion of a block that an accepted increment leaves out of
 #: balance by more than this fraction of the forces on it (``kernels.relaxation.block_imbalance``)
 LOOSE_BLOCK = 0.1
+#: step memory (``Increments.adapt``): a part that converged within this fraction of stall_iter
+#: iterations is quick, and ``QUICK_PARTS`` quick parts in a row take one halving back
+QUICK = 0.1
+QUICK_PARTS = 4
 
 
 def run_stage(sim, stage, where, first=0, starts=None):
@@ -36,6 +41,8 @@ def run_stage(sim, stage, where, first=0, starts=None):
                 sim.lam[0] = sim.factors[ctl.pattern.name]
             C.pattern_forces(sim, ctl.pattern)
     start_values = [[list(key), float(starts[key])] for key in targets]
+    if not resumed:   # a new load path: no step memory from the last stage
+        sim.split = sim.quick = 0
     sim.stage_name = stage.name
     until = stage.until
     side = None if until is None else np.sign(until.value - until.position(sim))
@@ -47,7 +54,7 @@ def run_stage(sim, stage, where, first=0, starts=None):
         # ... unless that part was its last: the controls at its goal, the increment done
         if not (resumed and i == first and sim._checkpoint_inside
                 and all(sim.values.get(k) == v for k, v in goal.items())):
-            increment(sim, stage, targets, goal, indirect, depth=0)
+            advance(sim, stage, targets, goal, indirect)
         reached = bool(side) and side * (until.value - until.position(sim)) <= 0.0
         # (a stage its Until ends is done: a resume goes on with the next)
         sim.stage_position = (where[0], n if reached else i + 1, start_values, where[1], n)
@@ -66,6 +73,38 @@ def run_stage(sim, stage, where, first=0, starts=None):
                           f"longer path", RuntimeWarning, stacklevel=2)
     if indirect is not None:
         C.release(sim, indirect)
+
+
+def advance(sim, stage, targets, goal, indirect):
+    """Move the controls from their current values to ``goal`` in ``2 ** sim.split`` equal
+    parts, each an :func:`increment` at that cut depth (so each may still be cut
+    ``max_cuts - sim.split`` times)."""
+    split = sim.split
+    parts = 2 ** split
+    start = {key: sim.values.get(key, 0.0) for key in goal}
+    for j in range(1, parts):
+        part = {k: start[k] + (goal[k] - start[k]) * j / parts for k in goal}
+        increment(sim, stage, targets, part, indirect, depth=split)
+    increment(sim, stage, targets, goal, indirect, depth=split)
+
+
+def adapt_split(sim, depth, iterations):
+    """The step memory after a part accepted at cut depth ``depth`` in ``iterations``: one
+    reached by a cut splits the next increments as finely (at most max_cuts - 1 halvings);
+    ``QUICK_PARTS`` quick ones in a row take one halving back (``Increments.adapt``)."""
+    inc = sim.options.increments
+    if not inc.adapt or inc.stall_iter <= 0:
+        return
+    if depth > sim.split:
+        sim.split = min(depth, max(inc.max_cuts - 1, 0))
+        sim.quick = 0
+    elif iterations <= QUICK * inc.stall_iter:
+        sim.quick += 1
+        if sim.quick >= QUICK_PARTS and sim.split > 0:
+            sim.split -= 1
+            sim.quick = 0
+    else:
+        sim.quick = 0
 
 
 def increment(sim, stage, targets, goal, indirect, depth, parent_diss=None):
@@ -113,6 +152,7 @@ def increment(sim, stage, targets, goal, indirect, depth, parent_diss=None):
     sim.dctl_prev = dctl
     sim.dlam_prev = float(sim.lam[0] - snap[7][0])
     commit(sim, out, elapsed, v.energies, v.balance, C.control_code(indirect))
+    adapt_split(sim, depth, out.iterations)
     if depth > 0 and sim.checkpoints.due(sim):
         sim.checkpoints.write(sim, inside=True)   # a part of a cut increment (hours, some)
 

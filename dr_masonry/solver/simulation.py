@@ -202,6 +202,8 @@ class Simulation:
         self.opening_slope = None   # opening control: reaction N per unit factor (secant)
         self.opening_gmul = 1.0     # opening control with a rate: the multiple of its gain
         self.dlam_prev = 0.0        # opening control: the last increment's change of factor
+        self.split = 0              # step memory: halvings the next increment starts with
+        self.quick = 0              # step memory: quick parts in a row at that split
         self.writer = None
         if self.output is not None:
             make_folder(os.path.dirname(os.path.abspath(self.output)))
