@@ -94,7 +94,7 @@ def test_one_correction_from_rest(kc):
     """One coarse correction from rest lands within 3 % of the converged displacement field
     (affine blocks represent their own compression, so a stiff compression penalty does not
     make the coarse model too stiff); the relaxed answer is the same with and without it, in a
-    fraction of the iterations."""
+    fraction of the iterations, and the row counts the corrections it accepted."""
     plain = Simulation(_column(30, kc), SolverOptions(tol=1e-5, coarse=False))
     hist = plain.run([Stage("g", 1, [Load(pattern=Gravity(), to=1000.0)])])
     exact = plain.dyn.U.copy()
@@ -105,6 +105,8 @@ def test_one_correction_from_rest(kc):
     hist_c = sim.run([stage])
     assert np.abs(sim.dyn.U - exact).max() < 1e-3 * np.abs(exact).max()
     assert hist_c["iterations"][0] < 0.3 * hist["iterations"][0]
+    assert hist_c["coarse_accepted"][0] >= 1 and hist["coarse_accepted"][0] == 0
+    assert hist["coarse_rejected"][0] == 0
 
 
 def test_joint_stiffness_secant_only_where_it_slides():

@@ -119,6 +119,7 @@ def increment(sim, stage, targets, goal, indirect, depth, parent_diss=None):
     tol = stage.tol or sim.options.convergence.tol
     stall = inc.stall_iter if depth < inc.max_cuts else 0
     t0 = time.perf_counter()
+    coarse0 = coarse_counts(sim)
     if isinstance(indirect, C.L.Opening):
         key = C.key(indirect)
         con = C.constraint(sim, indirect, goal[key], opening_gain(sim, indirect))
@@ -126,6 +127,7 @@ def increment(sim, stage, targets, goal, indirect, depth, parent_diss=None):
     else:
         out = relax_increment(sim, ctrl, pc, tol, max_iter, stall)
     elapsed = time.perf_counter() - t0
+    coarse = tuple(b - a for a, b in zip(coarse0, coarse_counts(sim)))
     failed = cert.failure(sim, stage, out)
     if failed:
         C.restore(sim, snap)
@@ -151,10 +153,16 @@ def increment(sim, stage, targets, goal, indirect, depth, parent_diss=None):
     sim.du_prev = predictor_motion(sim, snap[0])
     sim.dctl_prev = dctl
     sim.dlam_prev = float(sim.lam[0] - snap[7][0])
-    commit(sim, out, elapsed, v.energies, v.balance, C.control_code(indirect))
+    commit(sim, out, elapsed, v.energies, v.balance, C.control_code(indirect), coarse)
     adapt_split(sim, depth, out.iterations)
     if depth > 0 and sim.checkpoints.due(sim):
         sim.checkpoints.write(sim, inside=True)   # a part of a cut increment (hours, some)
+
+
+def coarse_counts(sim):
+    """(accepted, rejected) coarse corrections of the run so far (0, 0 before the first)."""
+    co = sim.coarse
+    return (0, 0) if co is None else (co.n_corrections - co.n_rejected, co.n_rejected)
 
 
 def _set_up(sim, targets, goal, start, indirect, u_before):

@@ -12,11 +12,11 @@ from . import certificate as cert
 from .arrays import mark_pristine
 
 
-def commit(sim, out, elapsed, energies, balance, control=0):
+def commit(sim, out, elapsed, energies, balance, control=0, coarse=(0, 0)):
     """Accept the increment that ended with ``out`` (``R.Exit``; ``energies`` and ``balance``
     of its :data:`~.certificate.Verdict`; ``control``: what it ran under,
-    ``controls.CONTROL_CODES``): commit the state, make its history row and hand it to
-    ``sim.observers``."""
+    ``controls.CONTROL_CODES``; ``coarse``: the coarse corrections its relaxation accepted and
+    rejected): commit the state, make its history row and hand it to ``sim.observers``."""
     d, mesh, cont = sim.dyn, sim.mesh, sim.cont
     sim.energy.commit(energies, d.U)
     mesh.s_old[:] = mesh.s_new
@@ -28,6 +28,7 @@ def commit(sim, out, elapsed, energies, balance, control=0):
     row = {"increment": sim.increment, "iterations": out.iterations, "residual": out.residual,
            "time_s": elapsed, "control": control, "lambda": float(sim.lam[0]),
            "cut_iterations": sim._cut_work[0], "cut_s": sim._cut_work[1],
+           "coarse_accepted": coarse[0], "coarse_rejected": coarse[1],
            "dissipation_ratio": energies.ratio, **energy_columns, "E_kinetic": out.kinetic,
            "balance_error": balance_error}
     row.update(state_columns(sim, out, balance))
