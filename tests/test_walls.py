@@ -523,45 +523,84 @@ def test_replot_draws_a_stopped_run_without_running(tmp_path, monkeypatch):
         squat_wall.main(argv[:3] + [f"out={tmp_path / 'none'}", "replot=true"])
 
 
+def _every_part(monkeypatch):
+    """Make runs write their restart data after every committed row (``checkpoint_s`` 0)."""
+    from dr_masonry import SolverOptions
+    init = SolverOptions.__init__
+
+    def every_part(self, *a, **k):
+        init(self, *a, **k)
+        self.output.checkpoint_s = 0.0
+    monkeypatch.setattr(SolverOptions, "__init__", every_part)
+
+
+CUT_PARAMS = dict(increments=6, frames=100, max_iter=500, max_cuts=8)
+
+
 def test_resume_after_the_last_part_of_a_cut_increment(tmp_path, monkeypatch):
     """A run stopped when the last part of a cut increment has been committed and checkpointed
     (the checkpoint of that part, "inside" the increment, is the last one on disk) resumes
     with the next increment: no repeated row at the same target (S7 cyclic rows 55-56 and
     64-65 repeated theirs)."""
-    from dr_masonry import SolverOptions
     from dr_masonry.solver import checkpoint
-    init, increment, write = (SolverOptions.__init__, increments.increment,
-                              checkpoint.Checkpoints.write)
-
-    def every_part(self, *a, **k):
-        init(self, *a, **k)
-        self.output.checkpoint_s = 0.0
-    params = dict(tiny(squat_wall), increments=6, frames=100, max_iter=500, max_cuts=8)
+    advance, write = increments.advance, checkpoint.Checkpoints.write
+    params = dict(tiny(squat_wall), **CUT_PARAMS)
     _, whole, _, _ = squat_wall.run(dict(params, h5=str(tmp_path / "whole.h5")))
     assert whole["cut_iterations"].sum() > 0          # increments were cut
-    monkeypatch.setattr(SolverOptions, "__init__", every_part)
+    _every_part(monkeypatch)
     stopped, last_inside = [], [False]
 
     def note_checkpoint(self, sim, inside=False):
         write(self, sim, inside)
         last_inside[0] = inside
 
-    def stop_after_a_cut_one(sim, stage, targets, goal, indirect, depth, parent_diss=None):
-        increment(sim, stage, targets, goal, indirect, depth, parent_diss)
-        if depth == 0 and last_inside[0] and not stopped:
+    def stop_after_a_cut_one(sim, *args):
+        advance(sim, *args)
+        if last_inside[0] and not stopped:
             stopped.append(sim.increment)
             raise KeyboardInterrupt
     monkeypatch.setattr(checkpoint.Checkpoints, "write", note_checkpoint)
-    monkeypatch.setattr(increments, "increment", stop_after_a_cut_one)
+    monkeypatch.setattr(increments, "advance", stop_after_a_cut_one)
     h5 = str(tmp_path / "s5.h5")
     with pytest.raises(KeyboardInterrupt):
         squat_wall.run(dict(params, h5=h5))
-    assert open_result(h5).checkpoint()[2]["inside"]   # the checkpoint of the last part
-    monkeypatch.setattr(increments, "increment", increment)
+    ck = open_result(h5).checkpoint()[2]
+    assert ck["inside"] and ck["pending"] == []   # the checkpoint of the last part
+    monkeypatch.setattr(increments, "advance", advance)
     sim, hist, _, _ = squat_wall.run(dict(params, h5=h5, resume=True))
     sim.close()
     assert stopped and np.array_equal(hist["beam.ux"], whole["beam.ux"])
     assert np.allclose(hist["beam.fx"], whole["beam.fx"], rtol=1e-3, atol=1.0)
+
+
+def test_resume_inside_a_cut_increment_is_the_uninterrupted_run(tmp_path, monkeypatch):
+    """A run stopped after the first part of a cut increment, with parts of it still to run,
+    stores them in its checkpoint; resumed, it runs those same parts and its rows are the
+    uninterrupted run's bit for bit (the resumed run once split the remainder anew: S7 -x row
+    11 went to -5.05 mm where the stopped run had been relaxing towards -5.37 mm)."""
+    from dr_masonry.solver import checkpoint
+    write = checkpoint.Checkpoints.write
+    params = dict(tiny(squat_wall), **CUT_PARAMS)
+    _, whole, _, _ = squat_wall.run(dict(params, h5=str(tmp_path / "whole.h5")))
+    _every_part(monkeypatch)
+    left = []
+
+    def stop_with_parts_left(self, sim, inside=False):
+        write(self, sim, inside)
+        if inside and sim.pending and not left:
+            left.append(list(sim.pending))
+            raise KeyboardInterrupt
+    monkeypatch.setattr(checkpoint.Checkpoints, "write", stop_with_parts_left)
+    h5 = str(tmp_path / "s5.h5")
+    with pytest.raises(KeyboardInterrupt):
+        squat_wall.run(dict(params, h5=h5))
+    ck = open_result(h5).checkpoint()[2]
+    assert left and ck["inside"] and len(ck["pending"]) == len(left[0]) > 0
+    monkeypatch.setattr(checkpoint.Checkpoints, "write", write)
+    sim, hist, _, _ = squat_wall.run(dict(params, h5=h5, resume=True))
+    sim.close()
+    for key in ("increment", "iterations", "cut_iterations", "beam.ux", "beam.fx", "W_ext"):
+        assert np.array_equal(hist[key], whole[key]), key
 
 
 def test_checkpoint_between_frames(tmp_path, monkeypatch):

@@ -46,6 +46,8 @@ class Checkpoints:
                 "factors": sim.factors, **energy_meta, "dctl_prev": sim.dctl_prev,
                 "dlam_prev": sim.dlam_prev, "opening_slope": sim.opening_slope,
                 "opening_gmul": sim.opening_gmul, "split": sim.split, "quick": sim.quick,
+                "pending": [[[[list(k), v] for k, v in goal.items()], depth, diss]
+                            for goal, depth, diss in sim.pending],
                 "history": {k: v for k, v in sim.history.items()}, "patterns": [],
                 "stage": list(sim.stage_position), "inside": inside}
         for name, (pat, P, rpP) in sim.patterns.items():
@@ -108,6 +110,9 @@ def load(sim, increment=None):
     sim.quick = meta.get("quick", 0)
     sim._checkpoint_stage = meta.get("stage")
     sim._checkpoint_inside = meta.get("inside", True)   # older files: may be
+    pending = meta.get("pending")   # older files: not stored (None: only inside an increment)
+    sim.pending = ([] if not sim._checkpoint_inside else None) if pending is None else [
+        ({tuple(k): v for k, v in goal}, depth, diss) for goal, depth, diss in pending]
     sim.history = {k: list(v) for k, v in meta["history"].items()}
     for name in meta["patterns"]:
         stored = L.StoredPattern(name, arrays[f"pattern_P/{name}"], arrays[f"pattern_rpP/{name}"])

@@ -43,17 +43,19 @@ def run_stage(sim, stage, where, first=0, starts=None):
     start_values = [[list(key), float(starts[key])] for key in targets]
     if not resumed:   # a new load path: no step memory from the last stage
         sim.split = sim.quick = 0
+    if not (resumed and sim._checkpoint_inside):
+        sim.pending = []
     sim.stage_name = stage.name
     until = stage.until
     side = None if until is None else np.sign(until.value - until.position(sim))
     for i in range(first, n):
-        # a checkpoint inside increment i (after a committed part of a cut increment) continues
-        # it from there ...
         sim.stage_position = (where[0], i, start_values, where[1], n)
         goal = {key: vals[i] for key, (ctl, vals) in targets.items()}
-        # ... unless that part was its last: the controls at its goal, the increment done
-        if not (resumed and i == first and sim._checkpoint_inside
-                and all(sim.values.get(k) == v for k, v in goal.items())):
+        if resumed and i == first and sim._checkpoint_inside:
+            # a checkpoint inside increment i (after a committed part of a cut increment)
+            # continues it with the parts it had left
+            resume_inside(sim, stage, targets, goal, indirect)
+        else:
             advance(sim, stage, targets, goal, indirect)
         reached = bool(side) and side * (until.value - until.position(sim)) <= 0.0
         # (a stage its Until ends is done: a resume goes on with the next)
@@ -82,10 +84,34 @@ def advance(sim, stage, targets, goal, indirect):
     split = sim.split
     parts = 2 ** split
     start = {key: sim.values.get(key, 0.0) for key in goal}
-    for j in range(1, parts):
-        part = {k: start[k] + (goal[k] - start[k]) * j / parts for k in goal}
-        increment(sim, stage, targets, part, indirect, depth=split)
-    increment(sim, stage, targets, goal, indirect, depth=split)
+    base = len(sim.pending)
+    for j in range(parts, 0, -1):   # the last part at the bottom of the work stack
+        sim.pending.append(({k: start[k] + (goal[k] - start[k]) * j / parts for k in goal}
+                            if j < parts else dict(goal), split, None))
+    drain(sim, stage, targets, indirect, base)
+
+
+def drain(sim, stage, targets, indirect, base=0):
+    """Run the parts on the work stack ``sim.pending`` above its first ``base`` entries, the
+    top one first: (goal, cut depth, parent's dissipation) each, as :func:`increment` takes
+    them. An increment cut in two pushes its halves, so the stack always holds what is left of
+    the increment in progress, and a checkpoint inside it stores that."""
+    while len(sim.pending) > base:
+        goal, depth, diss = sim.pending.pop()
+        increment(sim, stage, targets, goal, indirect, depth, diss)
+
+
+def resume_inside(sim, stage, targets, goal, indirect):
+    """Finish increment ``goal`` from a checkpoint inside it: the parts it stored
+    (``sim.pending``), the same ones the interrupted run had left. A checkpoint written before
+    it stored them (``sim.pending`` None) moves the controls on to ``goal`` in new parts, unless
+    that part was its last (the controls at their goal: the increment done)."""
+    if sim.pending is None:
+        sim.pending = []
+        if not all(sim.values.get(k) == v for k, v in goal.items()):
+            advance(sim, stage, targets, goal, indirect)
+        return
+    drain(sim, stage, targets, indirect)
 
 
 def adapt_split(sim, depth, iterations):
@@ -108,9 +134,10 @@ def adapt_split(sim, depth, iterations):
 
 
 def increment(sim, stage, targets, goal, indirect, depth, parent_diss=None):
-    """Relax one increment to ``goal`` and commit it, or cut it in two and recurse;
-    ``parent_diss``: the damage dissipation (J) of the attempt this half replaces when that
-    one was cut for dissipating too much."""
+    """Relax one increment to ``goal`` and commit it, or cut it in two: push both halves on
+    the work stack ``sim.pending`` (:func:`drain` runs them); ``parent_diss``: the damage
+    dissipation (J) of the attempt this half replaces when that one was cut for dissipating
+    too much."""
     inc = sim.options.increments
     snap = C.snapshot(sim)
     start = {key: sim.values.get(key, 0.0) for key in goal}
@@ -140,9 +167,8 @@ def increment(sim, stage, targets, goal, indirect, depth, parent_diss=None):
         if depth >= inc.max_cuts:
             sim.fail(cert.not_converged(sim, stage, out, v, tol, max_iter, depth))
         diss = v.energies.diss if v.too_much else None
-        increment(sim, stage, targets, {k: 0.5 * (start[k] + goal[k]) for k in goal}, indirect,
-                  depth + 1, diss)
-        increment(sim, stage, targets, goal, indirect, depth + 1, diss)
+        sim.pending.append((goal, depth + 1, diss))
+        sim.pending.append(({k: 0.5 * (start[k] + goal[k]) for k in goal}, depth + 1, diss))
         return
     if v.floor:
         warnings.warn(f"increment {sim.increment + 1} of stage {stage.name!r} accepted at "

@@ -204,6 +204,7 @@ class Simulation:
         self.dlam_prev = 0.0        # opening control: the last increment's change of factor
         self.split = 0              # step memory: halvings the next increment starts with
         self.quick = 0              # step memory: quick parts in a row at that split
+        self.pending = []           # parts of the increment in progress left to run
         self.writer = None
         if self.output is not None:
             make_folder(os.path.dirname(os.path.abspath(self.output)))
