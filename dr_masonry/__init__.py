@@ -15,7 +15,7 @@ from .solver import Simulation, SolverError
 from .drivers_joint import drive_joint
 from .drivers_material import drive_material, drive_strain_path
 
-__version__ = "0.3.0"
+__version__ = "0.3.1"
 __all__ = ["units", "Model", "ModelError", "JointLaw", "PlasticDamage", "Displacement", "Force",
            "Load", "Indirect", "Opening", "Stage", "Until", "Gravity", "BodyForce", "Pressure",
            "PointLoad", "Combined", "cyclic_path", "Simulation", "SolverOptions", "SolverError",

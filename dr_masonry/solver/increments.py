@@ -19,7 +19,7 @@ LOOSE_BLOCK = 0.1
 #: step memory (``Increments.adapt``): a part that converged within this fraction of stall_iter
 #: iterations is quick, and ``QUICK_PARTS`` quick parts in a row take one halving back
 QUICK = 0.1
-QUICK_PARTS = 4
+QUICK_PARTS = 8
 
 
 def run_stage(sim, stage, where, first=0, starts=None):
