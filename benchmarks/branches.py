@@ -41,7 +41,8 @@ OPTIONS = dict(alpha=("damping", "alpha", float), ring=("damping", "ring", float
                block_tol=("convergence", "block_tol", float),
                stall_iter=("increments", "stall_iter", int),
                adapt=("increments", "adapt", lambda v: {"true": True, "false": False}[v]),
-               coarse=("coarse", "enabled", lambda v: {"true": True, "false": False}.get(v, v)))
+               coarse=("coarse", "enabled", lambda v: {"true": True, "false": False}.get(v, v)),
+               coarse_test=("coarse", "test", str))
 
 
 def parse(item):

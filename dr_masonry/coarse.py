@@ -19,8 +19,9 @@ trial state (tangentially: along its traction only), elastic unloading elsewhere
 relaxation then only has to remove what the affine blocks cannot represent, local and fast: a
 two-level method with relaxation as the smoother. The operator is factorised once per increment
 (sparse LU, symmetric ordering). A step is accepted only if it moves no node by more than a trust
-radius (:data:`TRUST`) and lowers the total potential energy of the trial state (halved twice
-before giving up; the out-of-balance norm is no guide, as a coarse motion leaves element-scale
+radius (:data:`TRUST`) and lowers the total potential energy of the trial state (or, with
+``coarse_test="residual"``, leaves a residual that still works along it; halved twice before
+giving up; the out-of-balance norm is no guide, as a coarse motion leaves element-scale
 residuals); it changes trial states only, never the committed history, so it cannot damage
 anything the relaxation would not.
 
@@ -254,6 +255,18 @@ class BlockCoarse:
         e = v[:, :1] * t1 + v[:, 1:] * t2
         return e / np.linalg.norm(e, axis=1)[:, None]
 
+    def residual_work(self, lam, nodes, du, drp):
+        """Work (J) of the out-of-balance forces of the current trial state at load factor
+        ``lam`` along a step: the node motion ``du`` (m, 3) m of ``nodes`` (m,) and the
+        reference points' ``drp`` (nr, 6) (leaves the state's forces in ``dyn.fint`` and its
+        residual in ``dyn.res``). Positive while the step has not passed the equilibrium along
+        its line."""
+        d = self.sim.dyn
+        R.internal_forces(self.sim.mesh, self.sim.cont, d)
+        rp = np.zeros((d.rpX.shape[0], 6))
+        R.residual(d, lam, rp)
+        return float((d.res[nodes] * du).sum() + (rp * drp).sum())
+
     def potential(self, lam):
         """Total potential energy (J) of the current trial state: stored energy of blocks and
         joints minus the work of the applied loads at their current values (leaves the internal
@@ -376,8 +389,10 @@ class BlockCoarse:
 
     def correct(self, lam_arr, rpres, ctrl):
         """Apply one coarse correction to ``sim.dyn`` (after ``internal_forces`` and ``residual``
-        of the current state); returns True if it lowered the potential energy by a step within the
-        trust radius ``self.trust`` (m; else undone).
+        of the current state); returns True if a step within the trust radius ``self.trust`` (m)
+        passed the test of ``SolverOptions.coarse.test`` (else undone): it lowered the potential
+        energy (:meth:`potential`), or the residual at its end still works along it
+        (:meth:`residual_work`).
 
         The operator is factorised at the first correction of an increment and reused for the
         increment. Held node DOFs (supports, prescribed values) of coarse blocks are kept
@@ -406,22 +421,24 @@ class BlockCoarse:
             self.op = None
             return False
         du, drp = self.prolong(op, dq_k)
-        # the step of a linear coarse model, scaled back while it raises the potential energy
+        # the step of a linear coarse model, scaled back while it fails the test (Coarse.test)
         U0, rpU0 = d.U.copy(), d.rpU.copy()
         self.n_corrections += 1
         pi0 = None
+        residual_test = sim.options.coarse.test == "residual"
         for step in (1.0, 0.5, 0.25):
             lam_new = lam + step * dlam
             d.U[:], d.rpU[:] = U0, rpU0
             R.place_rigid_nodes(d)
-            if pi0 is None or dlam != 0.0:  # the reference energy depends on the load factor
+            if not residual_test and (pi0 is None or dlam != 0.0):  # (it depends on the factor)
                 pi0 = self.potential(lam_new)
             d.U[nodes] += step * du
             d.rpU[:] += step * drp
             R.place_rigid_nodes(d)
             if np.abs(d.U - U0).max(initial=0.0) > self.trust:
                 continue
-            if self.potential(lam_new) < pi0:
+            if (self.residual_work(lam_new, nodes, du, drp) >= 0.0 if residual_test
+                    else self.potential(lam_new) < pi0):
                 lam_arr[0] = lam_new
                 d.V[:] = 0.0
                 d.rpV[:] = 0.0

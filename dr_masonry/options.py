@@ -113,9 +113,14 @@ class Coarse:
     enabled : True, False or "auto" (on from ``COARSE_MIN_BLOCKS`` movable blocks; flat name
         ``coarse``)
     every : iterations between corrections (flat name ``coarse_every``)
+    test : what accepts a step (flat name ``coarse_test``): "energy", it lowers the stored
+        energy minus the load work; "residual", the out-of-balance force at its end still does
+        positive work along it (on the S4 wall 0.45 x the iterations, on the S5 wall the peak
+        row past the snap: docs/internals.md, "Decisions")
     """
     enabled: object = "auto"
     every: int = 200
+    test: str = "energy"
 
 
 @dataclass
@@ -143,13 +148,16 @@ class Output:
     progress: bool = False
 
 
+#: what accepts a coarse step (``Coarse.test``)
+COARSE_TESTS = ("energy", "residual")
 #: the groups, by attribute name of :class:`SolverOptions`
 GROUPS = {"convergence": Convergence, "increments": Increments, "damping": Damping,
           "coarse": Coarse, "sliding": Sliding, "output": Output}
 #: flat name -> (group, field)
 FLAT = {("damping" if (g, f.name) == ("damping", "scheme") else
          "coarse" if (g, f.name) == ("coarse", "enabled") else
-         "coarse_every" if (g, f.name) == ("coarse", "every") else f.name): (g, f.name)
+         "coarse_every" if (g, f.name) == ("coarse", "every") else
+         "coarse_test" if (g, f.name) == ("coarse", "test") else f.name): (g, f.name)
         for g, cls in GROUPS.items() for f in fields(cls)}
 
 
@@ -238,6 +246,9 @@ class SolverOptions:
                 or isinstance(k.enabled, str) and k.enabled == "auto"):
             raise OptionsError(f"SolverOptions.coarse={k.enabled!r}: must be True, False or "
                                "'auto'")
+        if k.test not in COARSE_TESTS:
+            raise OptionsError(f"SolverOptions.coarse_test={k.test!r}: valid values are "
+                               f"{list(COARSE_TESTS)}")
         for group, name, flat, low in ((i, "max_iter", "max_iter", 1),
                                        (c, "check_every", "check_every", 1),
                                        (k, "every", "coarse_every", 1),

@@ -31,7 +31,8 @@ def scene_params(defaults, fast, argv, doc, scene):
 #: scene parameters that are :class:`~dr_masonry.options.SolverOptions` fields of the same (flat)
 #: name: their defaults and meaning are the options' (docs/solver.md)
 OPTION_KEYS = ("tol", "damping", "alpha", "coarse", "max_dissipation", "redetect", "max_iter",
-               "max_cuts", "stall_iter", "adapt", "floor_tol", "gap_tol", "block_tol")
+               "max_cuts", "stall_iter", "adapt", "floor_tol", "gap_tol", "block_tol",
+               "coarse_test")
 #: the solver and output parameters of the wall and house scenes, with their defaults (a scene's
 #: ``PARAMS`` spreads them: ``dict(..., **RUN_PARAMS)``): the :data:`OPTION_KEYS` with the
 #: options' defaults, and

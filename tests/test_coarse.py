@@ -109,6 +109,33 @@ def test_one_correction_from_rest(kc):
     assert hist["coarse_rejected"][0] == 0
 
 
+def test_residual_test_accepts_the_step_short_of_equilibrium():
+    """``coarse_test="residual"``: from rest, the loaded column's coarse step leaves a residual
+    that still works along the step (positive), the same step 2.5 x as long has passed the
+    equilibrium along its line (negative work), and the correction lands where the energy
+    test's does, within 3 % of the relaxed field."""
+    plain = Simulation(_column(30), SolverOptions(tol=1e-5, coarse=False))
+    plain.run([Stage("g", 1, [Load(pattern=Gravity(), to=1000.0)])])
+    exact = plain.dyn.U.copy()
+    sim, co = _coarse_at_rest(None)
+    sim.options.coarse.test = "residual"
+    d = sim.dyn
+    op = co.operator(np.zeros(3, np.int64))
+    du, drp = co.prolong(op, op["solve"](co.project(op, d.res, np.zeros((0, 6)))[op["idx"]]))
+    nodes = op["nodes"]
+    works = []
+    for scale in (0.0, 1.0, 2.5):
+        d.U[:] = 0.0
+        d.U[nodes] += scale * du
+        works.append(co.residual_work(0.0, nodes, du, drp))
+    assert works[0] > 0.0 and works[1] > 0.0 > works[2]
+    d.U[:] = 0.0
+    R.internal_forces(sim.mesh, sim.cont, d)
+    R.residual(d, 0.0, np.zeros((0, 6)))
+    assert _correct(co)
+    assert np.linalg.norm(d.U - exact) < 0.03 * np.linalg.norm(exact)
+
+
 def test_joint_stiffness_secant_only_where_it_slides():
     """A block on a fixed foundation, every joint point closed with slip 1 mm under tau = 0.2 MPa
     in the direction (0.6, 0.8) of its face's frame: while the points stick, the coarse stiffness
