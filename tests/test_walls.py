@@ -607,12 +607,7 @@ def test_checkpoint_between_frames(tmp_path, monkeypatch):
     """With checkpoint_s = 0 the restart data follow every increment even when frames are
     sparse: an interrupted run loses no row and resumes from an increment without a frame."""
     from dr_masonry import SolverOptions
-    init = SolverOptions.__init__
-
-    def every_increment(self, *a, **k):
-        init(self, *a, **k)
-        self.output.checkpoint_s = 0.0
-    monkeypatch.setattr(SolverOptions, "__init__", every_increment)
+    _every_part(monkeypatch)
     interrupt_after(monkeypatch, 7)
     params = dict(tiny(squat_wall), h5=str(tmp_path / "s5.h5"), frames=100, increments=6)
     with pytest.raises(KeyboardInterrupt):

@@ -110,9 +110,12 @@ def load(sim, increment=None):
     sim.quick = meta.get("quick", 0)
     sim._checkpoint_stage = meta.get("stage")
     sim._checkpoint_inside = meta.get("inside", True)   # older files: may be
-    pending = meta.get("pending")   # older files: not stored (None: only inside an increment)
-    sim.pending = ([] if not sim._checkpoint_inside else None) if pending is None else [
-        ({tuple(k): v for k, v in goal}, depth, diss) for goal, depth, diss in pending]
+    pending = meta.get("pending")
+    if pending is not None:
+        sim.pending = [({tuple(k): v for k, v in goal}, depth, diss)
+                       for goal, depth, diss in pending]
+    else:   # older files: not stored; inside an increment, None: the rest is split anew
+        sim.pending = None if sim._checkpoint_inside else []
     sim.history = {k: list(v) for k, v in meta["history"].items()}
     for name in meta["patterns"]:
         stored = L.StoredPattern(name, arrays[f"pattern_P/{name}"], arrays[f"pattern_rpP/{name}"])
